@@ -1,0 +1,344 @@
+#include "mar_engine.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mar_time.h"
+
+struct mar_engine {
+    mar_engine_options opt;
+    size_t n_axes, n_ticks;
+    int64_t period_ns;              /* [ns] */
+    mar_axis *axes;                 /* n_axes */
+    double *show;                   /* n_axes rows of n_ticks positions [unit] */
+    double *loudness;               /* n_ticks taught loudness */
+    double *lead_s;                 /* per axis: how far ahead to sample [s] */
+    double *feed_forward;           /* per axis: lag inversion gain tau [s], 0 if off */
+    double *cmd;                    /* last command per axis [unit] */
+    double *vel;                    /* its velocity [unit/s] */
+
+    /* tick thread only */
+    double position;                /* p [show ticks] */
+    double rate;                    /* r [show ticks per tick] */
+    double live_loudness;
+    int64_t tick;
+    uint64_t bad_input_seen;        /* bad_input at the previous tick */
+
+    /* requests from other threads */
+    _Atomic double rate_request;
+    _Atomic double seek_request;
+    _Atomic int seek_pending;
+
+    _Atomic uint64_t ticks, overruns, limited, bad_input;
+    _Atomic int running;            /* real-time loop owns the tick */
+
+    mar_ring records;               /* flight recorder */
+    mar_ring loudness_in;           /* live loudness from Python */
+    mar_sink sink;
+
+    /* seqlock-protected copy of the latest tick */
+    _Atomic uint32_t snap_seq;
+    mar_record snap;
+    double *snap_cmd;
+
+    mar_hist wake;                  /* wake latency [ns] */
+    mar_hist compute;               /* tick compute time [ns] */
+};
+
+static int check_axis(const mar_axis *a)
+{
+    const mar_limits *l = &a->limits;
+    if (!(l->pos_min <= l->pos_max) || !(l->max_speed > 0.0) || !(l->max_accel > 0.0))
+        return -EINVAL;
+    if (!(a->dead_time >= 0.0) || !(a->time_constant >= 0.0))
+        return -EINVAL;
+    if (!(a->start >= l->pos_min && a->start <= l->pos_max))
+        return -ERANGE;
+    if (!isfinite(l->pos_min) || !isfinite(l->pos_max) || !isfinite(a->dead_time) || !isfinite(a->time_constant))
+        return -EINVAL;
+    return 0;
+}
+
+mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axes, size_t n_axes,
+                              const double *show, size_t n_ticks, const double *loudness, int *status)
+{
+    *status = -EINVAL;
+    if (n_axes == 0 || n_ticks == 0 || !(opt->period > 0.0) || opt->period > 10.0)
+        return NULL;
+    if (opt->lead_mode < MAR_LEAD_NONE || opt->lead_mode > MAR_LEAD_DEAD_TIME_LAG)
+        return NULL;
+    if (opt->interp != MAR_INTERP_LINEAR && opt->interp != MAR_INTERP_CUBIC)
+        return NULL;
+    for (size_t j = 0; j < n_axes; j++) {
+        int r = check_axis(&axes[j]);
+        if (r < 0) {
+            *status = r;
+            return NULL;
+        }
+    }
+    for (size_t i = 0; i < n_axes * n_ticks; i++)
+        if (!isfinite(show[i]))
+            return NULL;
+
+    *status = -ENOMEM;
+    mar_engine *e = calloc(1, sizeof *e);
+    if (!e)
+        return NULL;
+    e->opt = *opt;
+    e->n_axes = n_axes;
+    e->n_ticks = n_ticks;
+    e->period_ns = (int64_t)llround(opt->period * 1e9);
+    e->axes = malloc(n_axes * sizeof *e->axes);
+    e->show = malloc(n_axes * n_ticks * sizeof *e->show);
+    e->loudness = malloc(n_ticks * sizeof *e->loudness);
+    e->lead_s = malloc(n_axes * sizeof(double));
+    e->feed_forward = malloc(n_axes * sizeof(double));
+    e->cmd = malloc(n_axes * sizeof(double));
+    e->vel = calloc(n_axes, sizeof(double));
+    e->snap_cmd = calloc(n_axes, sizeof(double));
+    mar_axis_address *addr = malloc(n_axes * sizeof *addr);
+    int ok = e->axes && e->show && e->loudness && e->lead_s && e->feed_forward && e->cmd
+          && e->vel && e->snap_cmd && addr;
+    if (ok) {
+        memcpy(e->axes, axes, n_axes * sizeof *axes);
+        memcpy(e->show, show, n_axes * n_ticks * sizeof *show);
+        for (size_t i = 0; i < n_ticks; i++)    /* missing loudness reads as NaN */
+            e->loudness[i] = loudness ? loudness[i] : NAN;
+        for (size_t j = 0; j < n_axes; j++) {
+            const mar_axis *a = &axes[j];
+            e->lead_s[j] = opt->lead_mode == MAR_LEAD_NONE ? 0.0
+                         : opt->lead_mode == MAR_LEAD_MEAN_DELAY ? a->dead_time + a->time_constant
+                         : a->dead_time;
+            e->feed_forward[j] = opt->lead_mode == MAR_LEAD_DEAD_TIME_LAG ? a->time_constant : 0.0;
+            e->cmd[j] = a->start;
+            addr[j] = a->address;
+        }
+        *status = mar_sink_init(&e->sink, n_axes, addr);
+        ok = *status == 0;
+    }
+    free(addr);
+    if (ok && opt->record_slots > 0)
+        ok = (*status = mar_ring_init(&e->records, mar_engine_record_size(e), opt->record_slots)) == 0;
+    if (ok)
+        ok = (*status = mar_ring_init(&e->loudness_in, sizeof(double), opt->loudness_slots)) == 0;
+    if (!ok) {
+        mar_engine_destroy(e);
+        return NULL;
+    }
+    e->rate = 1.0;
+    e->live_loudness = NAN;
+    atomic_init(&e->rate_request, 1.0);
+    atomic_init(&e->seek_request, 0.0);
+    mar_hist_reset(&e->wake);
+    mar_hist_reset(&e->compute);
+    *status = 0;
+    return e;
+}
+
+void mar_engine_destroy(mar_engine *e)
+{
+    if (!e)
+        return;
+    if (e->records.slots)
+        mar_ring_free(&e->records);
+    if (e->loudness_in.slots)
+        mar_ring_free(&e->loudness_in);
+    mar_sink_free(&e->sink);
+    free(e->axes);
+    free(e->show);
+    free(e->loudness);
+    free(e->lead_s);
+    free(e->feed_forward);
+    free(e->cmd);
+    free(e->vel);
+    free(e->snap_cmd);
+    free(e);
+}
+
+/* Newest live loudness; older frames are consumed and dropped. */
+static void read_live_loudness(mar_engine *e)
+{
+    double frames[16];
+    size_t n;
+    while ((n = mar_ring_pop(&e->loudness_in, frames, 16)) > 0)
+        e->live_loudness = frames[n - 1];
+}
+
+static void publish_snapshot(mar_engine *e, const mar_record *rec)
+{
+    uint32_t seq = atomic_load_explicit(&e->snap_seq, memory_order_relaxed);
+    atomic_store_explicit(&e->snap_seq, seq + 1, memory_order_relaxed);
+    atomic_thread_fence(memory_order_release);
+    e->snap = *rec;
+    memcpy(e->snap_cmd, e->cmd, e->n_axes * sizeof(double));
+    atomic_store_explicit(&e->snap_seq, seq + 2, memory_order_release);
+}
+
+void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
+{
+    const double T = e->opt.period;
+    const double last = (double)(e->n_ticks - 1);
+    uint32_t flags = 0;
+
+    /* 1. playback clock: advance by the rate in force since the last tick,
+     *    then take requests. Missed periods still count (real time). */
+    if (e->tick > 0)
+        e->position += e->rate * (double)elapsed_periods;
+    e->rate = atomic_load_explicit(&e->rate_request, memory_order_relaxed);
+    if (atomic_exchange_explicit(&e->seek_pending, 0, memory_order_acquire))
+        e->position = atomic_load_explicit(&e->seek_request, memory_order_relaxed);
+    if (e->position < 0.0)
+        e->position = 0.0;
+    if (e->position >= last) {
+        e->position = last;
+        flags |= MAR_FLAG_END;
+    }
+    read_live_loudness(e);
+    uint64_t bad = atomic_load_explicit(&e->bad_input, memory_order_relaxed);
+    if (bad != e->bad_input_seen) {
+        e->bad_input_seen = bad;
+        flags |= MAR_FLAG_BAD_INPUT;
+    }
+
+    /* 2. per axis: sample ahead by the behaviour model, then hard limits */
+    const double p = e->position, r = e->rate;
+    uint32_t limited = 0;
+    for (size_t j = 0; j < e->n_axes; j++) {
+        double slope;                                       /* [unit/show tick] */
+        double ahead = p + r * e->lead_s[j] / T;            /* [show ticks] */
+        double x = mar_sample(e->show + j * e->n_ticks, e->n_ticks, ahead, e->opt.interp, &slope);
+        double target = x + e->feed_forward[j] * slope * r / T;
+        int hit;
+        e->cmd[j] = mar_limit_step(&e->axes[j].limits, T, e->cmd[j], e->vel[j], target, &e->vel[j], &hit);
+        limited += (uint32_t)hit;
+    }
+    if (limited)
+        flags |= MAR_FLAG_LIMITED;
+
+    double slope;
+    mar_record rec = {
+        .tick = e->tick,
+        .time_ns = now_ns,
+        .position = p,
+        .rate = r,
+        .live_loudness = e->live_loudness,
+        .stored_loudness = mar_sample(e->loudness, e->n_ticks, p, MAR_INTERP_LINEAR, &slope),
+        .flags = flags,
+        .limited_axes = limited,
+    };
+
+    /* 3. out to the servos, 4. flight recorder and snapshot */
+    mar_sink_emit(&e->sink, (uint32_t)e->tick, e->cmd);
+    uint8_t *slot = e->records.slots ? mar_ring_claim(&e->records) : NULL;
+    if (slot) {
+        memcpy(slot, &rec, sizeof rec);
+        memcpy(slot + sizeof rec, e->cmd, e->n_axes * sizeof(double));
+        mar_ring_publish(&e->records);
+    }
+    publish_snapshot(e, &rec);
+
+    e->tick++;
+    atomic_fetch_add_explicit(&e->ticks, 1, memory_order_relaxed);
+    if (limited)
+        atomic_fetch_add_explicit(&e->limited, limited, memory_order_relaxed);
+}
+
+int mar_engine_step(mar_engine *e, uint64_t n)
+{
+    if (atomic_load(&e->running))
+        return -EBUSY;
+    for (uint64_t i = 0; i < n; i++) {
+        int64_t t0 = mar_now_ns();
+        mar_engine_tick(e, e->tick * e->period_ns, 1);
+        mar_hist_add(&e->compute, mar_now_ns() - t0);
+    }
+    return 0;
+}
+
+int mar_engine_set_rate(mar_engine *e, double rate)
+{
+    if (!isfinite(rate)) {
+        atomic_fetch_add(&e->bad_input, 1);
+        return -EINVAL;
+    }
+    atomic_store_explicit(&e->rate_request, rate, memory_order_relaxed);
+    return 0;
+}
+
+int mar_engine_seek(mar_engine *e, double position)
+{
+    if (!isfinite(position)) {
+        atomic_fetch_add(&e->bad_input, 1);
+        return -EINVAL;
+    }
+    atomic_store_explicit(&e->seek_request, position, memory_order_relaxed);
+    atomic_store_explicit(&e->seek_pending, 1, memory_order_release);
+    return 0;
+}
+
+int mar_engine_push_loudness(mar_engine *e, double value)
+{
+    if (!isfinite(value) || value < 0.0) {
+        atomic_fetch_add(&e->bad_input, 1);
+        return -EINVAL;
+    }
+    return mar_ring_push(&e->loudness_in, &value, sizeof value);
+}
+
+int mar_engine_snapshot(const mar_engine *e, mar_record *rec, double *commands)
+{
+    for (int attempt = 0; attempt < 1000; attempt++) {
+        uint32_t s1 = atomic_load_explicit(&e->snap_seq, memory_order_acquire);
+        if (s1 == 0)
+            return -EAGAIN;
+        if (s1 & 1u)
+            continue;
+        *rec = e->snap;
+        memcpy(commands, e->snap_cmd, e->n_axes * sizeof(double));
+        atomic_thread_fence(memory_order_acquire);
+        if (atomic_load_explicit(&e->snap_seq, memory_order_relaxed) == s1)
+            return 0;
+    }
+    return -EBUSY;
+}
+
+size_t mar_engine_record_size(const mar_engine *e)
+{
+    return sizeof(mar_record) + e->n_axes * sizeof(double);
+}
+
+size_t mar_engine_drain_records(mar_engine *e, void *dst, size_t max)
+{
+    return e->records.slots ? mar_ring_pop(&e->records, dst, max) : 0;
+}
+
+mar_sink *mar_engine_sink(mar_engine *e) { return &e->sink; }
+const mar_hist *mar_engine_wake_hist(const mar_engine *e) { return &e->wake; }
+const mar_hist *mar_engine_compute_hist(const mar_engine *e) { return &e->compute; }
+size_t mar_engine_n_axes(const mar_engine *e) { return e->n_axes; }
+size_t mar_engine_n_ticks(const mar_engine *e) { return e->n_ticks; }
+int64_t mar_engine_period_ns(const mar_engine *e) { return e->period_ns; }
+_Atomic int *mar_engine_running_flag(mar_engine *e) { return &e->running; }
+
+void mar_engine_counters(const mar_engine *e, mar_counters *c)
+{
+    c->ticks = atomic_load(&e->ticks);
+    c->overruns = atomic_load(&e->overruns);
+    c->limited = atomic_load(&e->limited);
+    c->bad_input = atomic_load(&e->bad_input);
+    c->records_dropped = e->records.slots ? mar_ring_dropped(&e->records) : 0;
+    c->loudness_dropped = mar_ring_dropped(&e->loudness_in);
+    c->sink_frames = atomic_load(&e->sink.frames);
+    c->sink_errors = atomic_load(&e->sink.errors);
+    c->sink_bytes = atomic_load(&e->sink.bytes);
+}
+
+void mar_engine_count_overruns(mar_engine *e, uint64_t n)
+{
+    atomic_fetch_add_explicit(&e->overruns, n, memory_order_relaxed);
+}
+
+void mar_engine_note_wake(mar_engine *e, int64_t latency_ns) { mar_hist_add(&e->wake, latency_ns); }
+void mar_engine_note_compute(mar_engine *e, int64_t compute_ns) { mar_hist_add(&e->compute, compute_ns); }

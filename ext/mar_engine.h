@@ -1,0 +1,113 @@
+/* The tick engine: per tick, sample each axis's taught trajectory ahead by
+ * its behaviour model's delay, limit the command, send it, record it.
+ *
+ * Plain C11, no Python. Status codes: 0 or a negative errno value.
+ * Real-time (mar_rtloop.h) and step mode run the same mar_engine_tick. */
+#ifndef MAR_ENGINE_H
+#define MAR_ENGINE_H
+
+#include <stdatomic.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "mar_hist.h"
+#include "mar_limits.h"
+#include "mar_ring.h"
+#include "mar_sample.h"
+#include "mar_sink.h"
+
+/* How far ahead of the music a servo is sent its setpoint. */
+enum mar_lead_mode {
+    MAR_LEAD_NONE = 0,          /* no compensation: x(t) */
+    MAR_LEAD_MEAN_DELAY = 1,    /* the paper: x(t + Td + tau) */
+    MAR_LEAD_DEAD_TIME_LAG = 2, /* x(t + Td) + tau * x'(t + Td): inverts dead time + first-order lag */
+};
+
+/* One axis: behaviour model, limits, addressing. */
+typedef struct {
+    mar_limits limits;
+    double dead_time;           /* pure delay [s] */
+    double time_constant;       /* first-order lag tau [s] */
+    double start;               /* command before the first tick [unit]; the figure is assumed there, at rest */
+    mar_axis_address address;
+} mar_axis;
+
+typedef struct {
+    double period;              /* tick period [s] */
+    int lead_mode;              /* enum mar_lead_mode */
+    int interp;                 /* enum mar_interp */
+    size_t record_slots;        /* flight recorder capacity [ticks]; 0 = no recorder */
+    size_t loudness_slots;      /* live loudness input capacity [frames] */
+} mar_engine_options;
+
+/* Flags in a record. */
+#define MAR_FLAG_LIMITED   1u   /* some axis could not follow its target this tick */
+#define MAR_FLAG_END       2u   /* the playback position reached the end of the show */
+#define MAR_FLAG_BAD_INPUT 4u   /* a non-finite rate, seek or loudness was refused */
+
+/* A flight-recorder record, followed in memory by n_axes commands [unit]. */
+typedef struct {
+    int64_t tick;               /* tick number since start */
+    int64_t time_ns;            /* scheduled tick time [ns]: CLOCK_MONOTONIC, or virtual in step mode */
+    double position;            /* playback position p [show ticks] */
+    double rate;                /* playback rate r [show ticks per tick] */
+    double live_loudness;       /* newest live loudness, NaN when none came */
+    double stored_loudness;     /* taught loudness at p */
+    uint32_t flags;             /* MAR_FLAG_* */
+    uint32_t limited_axes;      /* axes whose command was limited this tick */
+} mar_record;
+
+typedef struct {
+    uint64_t ticks;             /* ticks run */
+    uint64_t overruns;          /* deadlines missed (real-time) */
+    uint64_t limited;           /* axis-ticks where a limit acted */
+    uint64_t bad_input;         /* refused non-finite inputs */
+    uint64_t records_dropped;   /* flight recorder full */
+    uint64_t loudness_dropped;  /* live loudness input full */
+    uint64_t sink_frames, sink_errors, sink_bytes;
+} mar_counters;
+
+typedef struct mar_engine mar_engine;
+
+/* Copies axes, show (n_axes rows of n_ticks positions [unit]) and loudness
+ * (n_ticks values). On failure returns NULL and sets *status. */
+mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axes, size_t n_axes,
+                              const double *show, size_t n_ticks, const double *loudness, int *status);
+void mar_engine_destroy(mar_engine *e);
+
+/* One tick at time now_ns [ns], elapsed_periods (>= 1) periods after the
+ * previous one. Never allocates, never blocks, never fails. */
+void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods);
+
+/* Step mode: n ticks on a virtual clock (tick k at k * period). -EBUSY while
+ * the real-time loop runs. */
+int mar_engine_step(mar_engine *e, uint64_t n);
+
+/* Commands from any thread, applied at the start of the next tick. */
+int mar_engine_set_rate(mar_engine *e, double rate);      /* [show ticks per tick] */
+int mar_engine_seek(mar_engine *e, double position);      /* [show ticks] */
+int mar_engine_push_loudness(mar_engine *e, double value);
+
+/* Consistent copy of the latest tick (seqlock); commands needs n_axes
+ * doubles. -EAGAIN if no tick ran yet. */
+int mar_engine_snapshot(const mar_engine *e, mar_record *rec, double *commands);
+
+/* Flight recorder: copy up to max records of mar_engine_record_size bytes. */
+size_t mar_engine_record_size(const mar_engine *e);
+size_t mar_engine_drain_records(mar_engine *e, void *dst, size_t max);
+
+mar_sink *mar_engine_sink(mar_engine *e);
+void mar_engine_counters(const mar_engine *e, mar_counters *c);
+const mar_hist *mar_engine_wake_hist(const mar_engine *e);     /* wake latency [ns] */
+const mar_hist *mar_engine_compute_hist(const mar_engine *e);  /* tick compute time [ns] */
+size_t mar_engine_n_axes(const mar_engine *e);
+size_t mar_engine_n_ticks(const mar_engine *e);
+int64_t mar_engine_period_ns(const mar_engine *e);
+
+/* Used by the real-time loop only. */
+_Atomic int *mar_engine_running_flag(mar_engine *e);
+void mar_engine_count_overruns(mar_engine *e, uint64_t n);
+void mar_engine_note_wake(mar_engine *e, int64_t latency_ns);
+void mar_engine_note_compute(mar_engine *e, int64_t compute_ns);
+
+#endif

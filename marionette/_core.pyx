@@ -1,0 +1,231 @@
+# cython: language_level=3, boundscheck=False, wraparound=False
+"""Binding of the C tick engine (ext/) and the setpoint codec (firmware_protocol/).
+
+Validates arguments, then calls C, inside ``with nogil`` where the call may
+take time. Returns the C status codes; marionette.engine raises.
+"""
+import numpy as np
+cimport numpy as cnp
+from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
+from libc.stdlib cimport calloc, free
+from libc.string cimport memcpy
+
+from marionette._cengine cimport *
+
+cnp.import_array()
+
+LEAD_NONE = 0           # enum mar_lead_mode
+LEAD_MEAN_DELAY = 1
+LEAD_DEAD_TIME_LAG = 2
+INTERP_LINEAR = 0       # enum mar_interp
+INTERP_CUBIC = 1
+SINK_NONE = MAR_SINK_NONE
+SINK_FD = MAR_SINK_FD
+SINK_RING = MAR_SINK_RING
+FLAG_LIMITED = 1        # MAR_FLAG_*
+FLAG_END = 2
+FLAG_BAD_INPUT = 4
+
+# Fields of one axis, in SI units, as the C mar_axis takes them.
+AXIS_DTYPE = np.dtype([
+    ("pos_min", "f8"), ("pos_max", "f8"),          # position limits [unit]
+    ("max_speed", "f8"), ("max_accel", "f8"),      # [unit/s], [unit/s^2]
+    ("dead_time", "f8"), ("time_constant", "f8"),  # [s]
+    ("start", "f8"),                               # command before the first tick [unit]
+    ("node", "u1"), ("channel", "u1"),
+    ("scale", "f8"), ("offset", "f8"),             # counts = offset + scale * position
+])
+
+
+def record_dtype(size_t n_axes):
+    """numpy dtype of one flight-recorder record (mirrors mar_record)."""
+    return np.dtype([
+        ("tick", "<i8"), ("time_ns", "<i8"),
+        ("position", "<f8"), ("rate", "<f8"),
+        ("live_loudness", "<f8"), ("stored_loudness", "<f8"),
+        ("flags", "<u4"), ("limited_axes", "<u4"),
+        ("command", "<f8", (n_axes,)),
+    ])
+
+
+cdef class CoreEngine:
+    """Owns one mar_engine and its real-time loop."""
+    cdef mar_engine *engine
+    cdef mar_rtloop *loop
+    cdef readonly size_t n_axes
+    cdef readonly object record_dtype
+
+    def __cinit__(self, double period, int lead_mode, int interp, axes,
+                  cnp.ndarray[cnp.float64_t, ndim=2, mode="c"] show,
+                  cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] loudness,
+                  size_t record_slots, size_t loudness_slots):
+        axes = np.ascontiguousarray(axes, dtype=AXIS_DTYPE)
+        cdef size_t n_axes = axes.shape[0]
+        if show.shape[0] != n_axes or loudness.shape[0] != show.shape[1]:
+            raise ValueError("show must be (axes, ticks) and loudness (ticks,)")
+        cdef mar_axis *c_axes = <mar_axis *>calloc(max(n_axes, 1), sizeof(mar_axis))
+        if c_axes == NULL:
+            raise MemoryError()
+        cdef size_t j
+        for j in range(n_axes):
+            a = axes[j]
+            c_axes[j].limits.pos_min = a["pos_min"]
+            c_axes[j].limits.pos_max = a["pos_max"]
+            c_axes[j].limits.max_speed = a["max_speed"]
+            c_axes[j].limits.max_accel = a["max_accel"]
+            c_axes[j].dead_time = a["dead_time"]
+            c_axes[j].time_constant = a["time_constant"]
+            c_axes[j].start = a["start"]
+            c_axes[j].address.node = a["node"]
+            c_axes[j].address.channel = a["channel"]
+            c_axes[j].address.scale = a["scale"]
+            c_axes[j].address.offset = a["offset"]
+        cdef mar_engine_options opt
+        opt.period = period
+        opt.lead_mode = lead_mode
+        opt.interp = interp
+        opt.record_slots = record_slots
+        opt.loudness_slots = loudness_slots
+        cdef int status = 0
+        self.engine = mar_engine_create(&opt, c_axes, n_axes, &show[0, 0], show.shape[1],
+                                        &loudness[0], &status)
+        free(c_axes)
+        if self.engine == NULL:
+            raise ValueError(f"the C engine refused its configuration (status {status})")
+        self.loop = <mar_rtloop *>calloc(1, sizeof(mar_rtloop))
+        if self.loop == NULL:
+            raise MemoryError()
+        self.n_axes = n_axes
+        self.record_dtype = record_dtype(n_axes)
+
+    def __dealloc__(self):
+        if self.loop != NULL:
+            with nogil:
+                mar_rt_stop(self.loop)
+            free(self.loop)
+        if self.engine != NULL:
+            mar_engine_destroy(self.engine)
+
+    def step(self, uint64_t n):
+        """Run n ticks on the virtual clock; status code."""
+        cdef int r
+        with nogil:
+            r = mar_engine_step(self.engine, n)
+        return r
+
+    def start(self, int priority, int cpu, bint lock_memory, uint64_t max_ticks):
+        """Start the real-time loop; (status code, report dict)."""
+        cdef mar_rt_options opt
+        opt.priority = priority
+        opt.cpu = cpu
+        opt.lock_memory = lock_memory
+        opt.max_ticks = max_ticks
+        cdef int r
+        with nogil:
+            r = mar_rt_start(self.loop, self.engine, &opt)
+        rep = self.loop.report
+        return r, dict(fifo=bool(rep.fifo), fifo_error=rep.fifo_error, pinned=bool(rep.pinned),
+                       pin_error=rep.pin_error, memory_locked=bool(rep.memory_locked),
+                       lock_error=rep.lock_error)
+
+    def stop(self):
+        cdef int r
+        with nogil:
+            r = mar_rt_stop(self.loop)
+        return r
+
+    @property
+    def running(self):
+        """True while the real-time loop runs (False once it stopped by itself)."""
+        return bool(self.loop.started) and not self.loop.finished
+
+    def set_rate(self, double rate):
+        return mar_engine_set_rate(self.engine, rate)
+
+    def seek(self, double position):
+        return mar_engine_seek(self.engine, position)
+
+    def push_loudness(self, double value):
+        return mar_engine_push_loudness(self.engine, value)
+
+    def set_sink(self, int kind, int fd, size_t ring_slots):
+        return mar_sink_set(mar_engine_sink(self.engine), kind, fd, ring_slots)
+
+    def snapshot(self):
+        """(record as a one-element structured array, or None before the first tick)."""
+        out = np.zeros(1, dtype=self.record_dtype)
+        cdef cnp.ndarray buf = out.view(np.uint8)
+        cdef uint8_t *p = <uint8_t *>cnp.PyArray_DATA(buf)
+        cdef int r
+        with nogil:
+            r = mar_engine_snapshot(self.engine, <mar_record *>p, <double *>(p + sizeof(mar_record)))
+        return out[0] if r == 0 else None
+
+    def drain_records(self, size_t max_records=65536):
+        """Flight-recorder records waiting in the ring, oldest first."""
+        out = np.empty(max_records, dtype=self.record_dtype)
+        cdef void *p = cnp.PyArray_DATA(out)
+        cdef size_t n
+        with nogil:
+            n = mar_engine_drain_records(self.engine, p, max_records)
+        return out[:n]
+
+    def drain_frames(self, size_t max_frames=1024):
+        """Encoded setpoint frames waiting in the ring sink, as bytes, oldest first."""
+        cdef mar_sink *s = mar_engine_sink(self.engine)
+        cdef size_t slot = sizeof(uint32_t) + s.frame_cap
+        if s.ring.slot_size == 0:
+            return []
+        buf = np.empty(max_frames * slot, dtype=np.uint8)
+        cdef uint8_t *p = <uint8_t *>cnp.PyArray_DATA(buf)
+        cdef size_t n, i
+        cdef uint32_t length
+        with nogil:
+            n = mar_ring_pop(&s.ring, p, max_frames)
+        frames = []
+        for i in range(n):
+            memcpy(&length, p + i * slot, sizeof(uint32_t))
+            frames.append(bytes(buf[i * slot + 4: i * slot + 4 + length]))
+        return frames
+
+    def counters(self):
+        cdef mar_counters c
+        mar_engine_counters(self.engine, &c)
+        return c
+
+    def quantiles(self, str which, qs):
+        """Quantiles [ns] of the 'wake' or 'compute' histogram, then its count and max."""
+        cdef const mar_hist *h = (mar_engine_wake_hist(self.engine) if which == "wake"
+                                  else mar_engine_compute_hist(self.engine))
+        return [mar_hist_quantile(h, q) for q in qs], mar_hist_count(h), mar_hist_max(h)
+
+
+def encode_setpoints(uint32_t tick, nodes, channels, counts):
+    """One version-0 setpoint record as bytes (see firmware_protocol/mar_setpoint0.h)."""
+    cdef size_t n = len(counts), i
+    if n == 0 or n > 255 or len(nodes) != n or len(channels) != n:
+        raise ValueError(f"a version-0 record carries 1..255 entries, got {n}")
+    cdef mar_sp0_entry entries[255]
+    for i in range(n):
+        entries[i].node = nodes[i]
+        entries[i].channel = channels[i]
+        entries[i].counts = counts[i]
+    out = bytearray(mar_sp0_size(n))
+    cdef uint8_t *p = out
+    cdef long r = mar_sp0_encode(tick, entries, n, p, len(out))
+    if r < 0:
+        raise ValueError(f"setpoint encoder failed with status {r}")
+    return bytes(out)
+
+
+def decode_setpoints(const uint8_t[::1] data):
+    """Decode the record at the start of data: (status or used bytes, tick, [(node, channel, counts)])."""
+    cdef mar_sp0_entry entries[255]
+    cdef uint32_t tick = 0
+    cdef size_t n = 0, i
+    if data.shape[0] == 0:
+        return -1, 0, []
+    cdef long r = mar_sp0_decode(&data[0], data.shape[0], &tick, entries, 255, &n)
+    if r < 0:
+        return r, 0, []
+    return r, tick, [(entries[i].node, entries[i].channel, entries[i].counts) for i in range(n)]

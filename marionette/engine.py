@@ -1,0 +1,273 @@
+"""The Python face of the C tick engine.
+
+    config = marionette.load_config()              # the bundled figure
+    show = marionette.load_show("dance.csv", config)
+    with marionette.Engine(config, show, record="flight.bin") as engine:
+        engine.start()                             # real-time loop, 20 ms grid
+        ...
+        print(engine.stats())
+
+or ``engine.step(n)`` for n ticks on a virtual clock (tests, offline tools).
+"""
+from __future__ import annotations
+
+import errno
+import os
+import threading
+import time
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from marionette import _core
+from marionette.config import FigureConfig
+from marionette.errors import EngineError
+from marionette.recorder import FlightRecorder
+from marionette.show import Show, fit_to_figure
+
+LEAD_MODES = {"dead_time_lag": _core.LEAD_DEAD_TIME_LAG, "mean_delay": _core.LEAD_MEAN_DELAY,
+              "none": _core.LEAD_NONE}
+INTERPOLATIONS = {"cubic": _core.INTERP_CUBIC, "linear": _core.INTERP_LINEAR}
+RECORD_SLOTS = 4096      # flight-recorder ring [ticks], 82 s at 20 ms
+LOUDNESS_SLOTS = 256     # live loudness input ring [frames]
+FRAME_SLOTS = 256        # setpoint frames waiting for the Python sender [ticks]
+DRAIN_INTERVAL = 0.05    # how often the Python threads empty the rings [s]
+MAX_RATE = 10.0          # playback rate bound [show ticks per tick]
+
+
+def _raise_for(status: int, what: str) -> None:
+    if status < 0:
+        raise EngineError(f"{what}: {os.strerror(-status)} (status {status})")
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """A consistent copy of the latest tick."""
+
+    tick: int
+    time_s: float            # scheduled tick time [s]
+    position: float          # playback position [show ticks]
+    rate: float              # playback rate [show ticks per tick]
+    live_loudness: float     # newest live loudness, NaN when none came
+    stored_loudness: float   # taught loudness at the position
+    flags: int               # marionette._core.FLAG_*
+    commands: dict           # axis name -> command [unit]
+
+
+def axis_table(config: FigureConfig, start: np.ndarray) -> np.ndarray:
+    """The figure's axes as the C engine takes them (marionette._core.AXIS_DTYPE)."""
+    axes = np.zeros(len(config.axes), dtype=_core.AXIS_DTYPE)
+    for j, a in enumerate(config.axes):
+        axes[j] = (a.min, a.max, a.max_speed, a.max_accel, a.dead_time, a.time_constant,
+                   start[j], a.node, a.channel, a.scale, a.offset)
+    return axes
+
+
+class Engine:
+    """Plays a show on a figure: the C tick, in real time or in steps.
+
+    lead: "dead_time_lag" (default: x(t+Td) + tau*x'(t+Td)), "mean_delay"
+    (the paper: x(t+Td+tau)) or "none". interpolation: "cubic" or "linear".
+    output: where setpoints go: None; a file descriptor or an object with
+    fileno() (the tick writes to it itself, no GIL); or any object with
+    write(bytes) (a Python thread drains a ring into it). record: None,
+    True (keep records in memory) or a file path (flight record).
+    The figure is assumed to stand at the show's first pose, at rest.
+    """
+
+    def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
+                 interpolation: str = "cubic", output=None, record=None, rate: float = 1.0,
+                 on_limits: str = "error"):
+        if lead not in LEAD_MODES:
+            raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
+        if interpolation not in INTERPOLATIONS:
+            raise ValueError(f"interpolation must be one of {sorted(INTERPOLATIONS)}, "
+                             f"not {interpolation!r}")
+        self.config = config
+        self.show = fit_to_figure(show, config, on_limits)
+        positions = np.ascontiguousarray(self.show.positions, dtype=np.float64)
+        self._core = _core.CoreEngine(
+            config.tick_period, LEAD_MODES[lead], INTERPOLATIONS[interpolation],
+            axis_table(config, positions[:, 0]), positions,
+            np.ascontiguousarray(self.show.loudness, dtype=np.float64),
+            RECORD_SLOTS if record else 0, LOUDNESS_SLOTS)
+        self.recorder = None
+        if record:
+            path = None if record is True else Path(record)
+            meta = dict(figure=config.name, config=config.source, show=self.show.path,
+                        tick_period=config.tick_period, lead=lead, interpolation=interpolation)
+            self.recorder = FlightRecorder(self._core.record_dtype, config.axis_names, path, meta)
+        self._writer = None
+        self._attach_output(output)
+        self.set_rate(rate)
+        self._threads: list[threading.Thread] = []
+        self._stop_threads = threading.Event()
+        self.report: dict = {}
+
+    def _attach_output(self, output) -> None:
+        if output is None:
+            return
+        fd = output if isinstance(output, int) else getattr(output, "fileno", None)
+        if callable(fd):
+            try:
+                fd = fd()
+            except (OSError, ValueError):   # e.g. io objects without a descriptor
+                fd = None
+        if isinstance(fd, int):
+            os.set_blocking(fd, False)      # the tick must never block in write()
+            _raise_for(self._core.set_sink(_core.SINK_FD, fd, 0), "attaching the output")
+        elif hasattr(output, "write"):
+            _raise_for(self._core.set_sink(_core.SINK_RING, -1, FRAME_SLOTS), "attaching the output")
+            self._writer = output
+        else:
+            raise TypeError(f"output must be a file descriptor, have fileno() or write(), "
+                            f"not {type(output).__name__}")
+
+    # -- running ---------------------------------------------------------
+
+    def step(self, n: int = 1) -> None:
+        """Run n ticks on the virtual clock, as fast as the CPU allows."""
+        if n < 0:
+            raise ValueError(f"cannot step {n} ticks")
+        chunk = RECORD_SLOTS // 2
+        while n > 0:
+            k = min(n, chunk)
+            status = self._core.step(k)
+            if status == -errno.EBUSY:
+                raise EngineError("step(): the real-time loop is running; stop() it first")
+            _raise_for(status, "step")
+            self._drain()
+            n -= k
+
+    def start(self, *, priority: int = 80, cpu: int | None = None, lock_memory: bool = False,
+              max_ticks: int = 0) -> dict:
+        """Start the real-time loop (SCHED_FIFO at priority when permitted).
+
+        Returns what was granted; warns when FIFO, pinning or memory locking
+        was refused. max_ticks > 0 makes the loop stop by itself."""
+        if not 0 <= priority <= 99:
+            raise ValueError(f"priority must be 0..99, not {priority}")
+        status, report = self._core.start(priority, -1 if cpu is None else cpu,
+                                          lock_memory, max_ticks)
+        if status == -errno.EBUSY:
+            raise EngineError("start(): the real-time loop is already running")
+        _raise_for(status, "starting the real-time loop")
+        refused = []
+        if priority and not report["fifo"]:
+            refused.append(f"SCHED_FIFO priority {priority} ({os.strerror(report['fifo_error'])})")
+        if cpu is not None and not report["pinned"]:
+            refused.append(f"pinning to CPU {cpu} ({os.strerror(report['pin_error'])})")
+        if lock_memory and not report["memory_locked"]:
+            refused.append(f"mlockall ({os.strerror(report['lock_error'])})")
+        if refused:
+            warnings.warn("real-time loop runs without " + ", ".join(refused)
+                          + "; timing will be less regular", RuntimeWarning, stacklevel=2)
+        self.report = report
+        self._stop_threads.clear()
+        self._threads = [threading.Thread(target=self._drain_loop, name="marionette-drain",
+                                          daemon=True)]
+        for t in self._threads:
+            t.start()
+        return report
+
+    @property
+    def running(self) -> bool:
+        return self._core.running
+
+    def stop(self) -> None:
+        """Stop the real-time loop and drain what it left in the rings."""
+        _raise_for(self._core.stop(), "stopping the real-time loop")
+        self._stop_threads.set()
+        for t in self._threads:
+            t.join()
+        self._threads = []
+        self._drain()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait until the loop stops by itself (max_ticks); True if it did."""
+        end = None if timeout is None else time.monotonic() + timeout
+        while self._core.running:
+            if end is not None and time.monotonic() >= end:
+                return False
+            time.sleep(0.01)
+        return True
+
+    def close(self) -> None:
+        self.stop()
+        if self.recorder is not None:
+            self.recorder.close()
+
+    def __enter__(self) -> Engine:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _drain(self) -> None:
+        if self.recorder is not None:
+            while True:
+                records = self._core.drain_records(RECORD_SLOTS)
+                self.recorder.add(records)
+                if len(records) < RECORD_SLOTS:
+                    break
+        if self._writer is not None:
+            for frame in self._core.drain_frames(FRAME_SLOTS):
+                self._writer.write(frame)
+
+    def _drain_loop(self) -> None:
+        # Waits on the event between drains, so stop() wakes it at once.
+        interval = DRAIN_INTERVAL if self._writer is None else self.config.tick_period / 4
+        while not self._stop_threads.wait(interval):
+            self._drain()
+
+    # -- commands and readings -------------------------------------------
+
+    def set_rate(self, rate: float) -> None:
+        """Playback rate [show ticks per tick]; 1 plays as taught, 0 holds."""
+        if not (0.0 <= rate <= MAX_RATE):
+            raise ValueError(f"rate {rate!r} is outside [0, {MAX_RATE}] show ticks per tick")
+        _raise_for(self._core.set_rate(float(rate)), "set_rate")
+
+    def seek(self, position: float) -> None:
+        """Jump the playback position [show ticks]; the hard limits smooth the jump."""
+        if not (0.0 <= position <= self.show.n_ticks - 1):
+            raise ValueError(f"position {position!r} is outside [0, {self.show.n_ticks - 1}] ticks")
+        _raise_for(self._core.seek(float(position)), "seek")
+
+    def push_loudness(self, value: float) -> None:
+        """Hand the tick a live loudness frame (>= 0, finite); refused frames raise."""
+        status = self._core.push_loudness(float(value))
+        if status == -errno.EINVAL:
+            raise ValueError(f"live loudness {value!r} refused: it must be finite and >= 0")
+        _raise_for(status, "push_loudness")
+
+    def snapshot(self) -> Snapshot | None:
+        """The latest tick, consistent across all axes; None before the first tick."""
+        rec = self._core.snapshot()
+        if rec is None:
+            return None
+        return Snapshot(tick=int(rec["tick"]), time_s=int(rec["time_ns"]) * 1e-9,
+                        position=float(rec["position"]), rate=float(rec["rate"]),
+                        live_loudness=float(rec["live_loudness"]),
+                        stored_loudness=float(rec["stored_loudness"]), flags=int(rec["flags"]),
+                        commands=dict(zip(self.config.axis_names, map(float, rec["command"]))))
+
+    def records(self) -> np.ndarray:
+        """Flight-recorder records so far (requires record=...)."""
+        if self.recorder is None:
+            raise EngineError("records(): this engine was made without record=")
+        self._drain()
+        return self.recorder.records()
+
+    def stats(self) -> dict:
+        """Counters, and wake-latency and compute-time percentiles [us]."""
+        out = dict(self._core.counters())
+        for which in ("wake", "compute"):
+            (p50, p99, p999), count, peak = self._core.quantiles(which, (0.5, 0.99, 0.999))
+            out[which] = dict(count=count, p50_us=p50 / 1e3, p99_us=p99 / 1e3,
+                              p999_us=p999 / 1e3, max_us=peak / 1e3)
+        if self.recorder is not None:
+            out["recorded"] = self.recorder.count
+        return out

@@ -1,0 +1,76 @@
+"""Flight recorder: every tick's record (tick, time, playback position and
+rate, loudness, flags, every command), drained from the engine's ring by
+Python into memory or a file.
+
+File format (docs/formats.md): one ASCII header line
+``MARIONETTE-FLIGHT 1 <json>`` then the raw little-endian records, each laid
+out as ``marionette._core.record_dtype(n_axes)``.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+MAGIC = b"MARIONETTE-FLIGHT 1 "
+
+
+class FlightRecorder:
+    """Keeps drained records in memory, or appends them to a file when given a path."""
+
+    def __init__(self, dtype: np.dtype, axis_names: list[str], path: str | Path | None = None,
+                 meta: dict | None = None):
+        self.dtype = dtype
+        self.path = Path(path) if path is not None else None
+        self.count = 0                     # records kept [ticks]
+        self._chunks: list[np.ndarray] = []
+        self._file = None
+        if self.path is not None:
+            header = dict(meta or {}, axis_names=list(axis_names),
+                          record_bytes=dtype.itemsize)
+            self._file = open(self.path, "wb")
+            self._file.write(MAGIC + json.dumps(header).encode() + b"\n")
+
+    def add(self, records: np.ndarray) -> None:
+        if not len(records):
+            return
+        self.count += len(records)
+        if self._file is not None:
+            self._file.write(records.tobytes())
+        else:
+            self._chunks.append(records.copy())
+
+    def records(self) -> np.ndarray:
+        """All records so far (from memory, or re-read from the file)."""
+        if self.path is not None:
+            if self._file is not None:
+                self._file.flush()
+            return read_flight_record(self.path)[1]
+        if not self._chunks:
+            return np.empty(0, dtype=self.dtype)
+        return np.concatenate(self._chunks)
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+    def __del__(self):
+        self.close()
+
+
+def read_flight_record(path: str | Path) -> tuple[dict, np.ndarray]:
+    """(header dict, structured array of records) of a flight-record file."""
+    from marionette._core import record_dtype
+    with open(path, "rb") as f:
+        line = f.readline()
+        if not line.startswith(MAGIC):
+            raise ValueError(f"{path}: not a marionette flight record (bad first line)")
+        meta = json.loads(line[len(MAGIC):])
+        dtype = record_dtype(len(meta["axis_names"]))
+        raw = f.read()
+    if len(raw) % dtype.itemsize:
+        raise ValueError(f"{path}: {len(raw)} bytes of records is not a whole number of "
+                         f"{dtype.itemsize}-byte records (file cut short?)")
+    return meta, np.frombuffer(raw, dtype=dtype)

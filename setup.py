@@ -1,0 +1,35 @@
+"""Build of the C extension only; metadata lives in pyproject.toml.
+
+MARIONETTE_DEBUG=1     -O0 -g, asserts on
+MARIONETTE_SANITIZE=1  AddressSanitizer + UndefinedBehaviorSanitizer (run
+                       Python with LD_PRELOAD=$(gcc -print-file-name=libasan.so))
+"""
+import os
+from glob import glob
+
+import numpy
+from Cython.Build import cythonize
+from setuptools import Extension, setup
+
+debug = os.environ.get("MARIONETTE_DEBUG") == "1"
+sanitize = os.environ.get("MARIONETTE_SANITIZE") == "1"
+
+compile_args = ["-std=c11", "-Wall", "-Wextra", "-fno-strict-aliasing"]
+link_args = ["-lpthread", "-lm"]
+compile_args += ["-O0", "-g"] if debug else ["-O2"]
+if sanitize:
+    flags = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer"]
+    compile_args += flags
+    link_args += flags
+
+core = Extension(
+    "marionette._core",
+    sources=["marionette/_core.pyx"] + sorted(glob("ext/*.c")) + sorted(glob("firmware_protocol/*.c")),
+    include_dirs=["ext", "firmware_protocol", numpy.get_include()],
+    define_macros=[("_POSIX_C_SOURCE", "200809L"), ("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")]
+    + ([] if debug else [("NDEBUG", None)]),
+    extra_compile_args=compile_args,
+    extra_link_args=link_args,
+)
+
+setup(ext_modules=cythonize([core], compiler_directives={"language_level": "3"}))
