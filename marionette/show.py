@@ -180,11 +180,11 @@ def validate(show: Show) -> None:
     bad = np.argwhere(~np.isfinite(p))
     if bad.size:
         j, k = bad[0]
-        raise ShowError(f"{show.locate(k)}: axis {show.axis_names[j]!r} has value {p[j, k]!r}")
+        raise ShowError(f"{show.locate(k)}: axis {show.axis_names[j]!r} has value {float(p[j, k])!r}")
     bad = np.flatnonzero(~(show.loudness >= 0))
     if bad.size:
         k = bad[0]
-        raise ShowError(f"{show.locate(k)}: loudness {show.loudness[k]!r} must be finite and >= 0")
+        raise ShowError(f"{show.locate(k)}: loudness {float(show.loudness[k])!r} must be finite and >= 0")
 
 
 def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") -> Show:
@@ -221,7 +221,7 @@ def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") ->
             continue
         k = outside[0]
         if on_limits == "error":
-            raise ShowError(f"{show.locate(k)}: axis {axis.name!r} position {x[k]!r} {axis.unit} is "
+            raise ShowError(f"{show.locate(k)}: axis {axis.name!r} position {float(x[k])!r} {axis.unit} is "
                             f"outside its limits [{axis.min!r}, {axis.max!r}] "
                             f"({outside.size} ticks outside; on_limits='clamp' or 'compress' fits it)")
         if on_limits == "clamp":

@@ -1,0 +1,14 @@
+"""Benchmarks of the C tick engine, and the pure-numpy reference tick they compare against.
+
+- ``marionette.bench.tick``: compute time per tick in step mode [us] for 16, 256
+  and 4096 axes, against the numpy reference tick on the same figure and show.
+- ``marionette.bench.jitter``: wake latency of the real-time loop at the 20 ms
+  period [us], beside ``cyclictest`` (rt-tests) at the same period and
+  priority, and again under Python threads churning the GIL.
+- ``marionette.bench.reference``: the numpy reference tick (benchmarks and
+  tests only; the engine itself never runs it).
+
+Each benchmark module has ``run(...)`` (returns plain data) and ``main(argv)``
+(argparse; prints a table, or JSON with ``--json``), so the CLI dispatches
+``marionette bench tick ...`` to ``marionette.bench.tick.main(argv)``.
+"""

@@ -1,0 +1,140 @@
+"""The ``marionette`` command.
+
+    marionette play [SHOW] [--config FIGURE.toml] [--realtime] ...
+    marionette check [--config FIGURE.toml] [SHOW]
+    marionette bench tick|jitter [...]
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+import numpy as np
+
+from marionette.config import load_config
+from marionette.demo import DEMO_SHOW
+from marionette.engine import INTERPOLATIONS, LEAD_MODES, Engine
+from marionette.errors import MarionetteError
+from marionette.show import LIMIT_POLICIES, load_show
+
+BENCHES = ("tick", "jitter")
+
+
+def _figure_and_show(args):
+    config = load_config(args.config)
+    show = load_show(args.show or DEMO_SHOW, config, on_limits=args.on_limits)
+    return config, show
+
+
+def cmd_check(args) -> int:
+    config, show = _figure_and_show(args)
+    print(f"{config.source}: {config.name}, {len(config.axes)} axes, tick {config.tick_period * 1e3:g} ms")
+    print(f"{show.path}: {show.n_ticks} ticks ({show.duration:.2f} s), music {show.music or '-'}")
+    for change in show.changes:
+        print(f"  changed: {change}")
+    return 0
+
+
+def cmd_play(args) -> int:
+    config, show = _figure_and_show(args)
+    output_fd = None
+    if args.output:
+        output_fd = os.open(args.output, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
+    n = args.ticks if args.ticks is not None else show.n_ticks
+    try:
+        with Engine(config, show, lead=args.lead, interpolation=args.interpolation,
+                    output=output_fd, record=args.record or True, rate=args.rate) as engine:
+            if args.realtime:
+                engine.start(priority=args.priority, max_ticks=n)
+                engine.wait()
+                engine.stop()
+            else:
+                engine.step(n)
+            stats = engine.stats()
+            records = engine.records()
+    finally:
+        if output_fd is not None:
+            os.close(output_fd)
+    mode = "real time" if args.realtime else "step mode"
+    print(f"played {show.path} on {config.name} in {mode}: {stats['ticks']} ticks "
+          f"({stats['ticks'] * config.tick_period:.2f} s of show), lead {args.lead}, "
+          f"{args.interpolation} interpolation, rate {args.rate:g}")
+    for change in show.changes:
+        print(f"  show changed: {change}")
+    print(f"  flight recorder: {stats['recorded']} records, {stats['records_dropped']} dropped"
+          + (f", written to {args.record}" if args.record else ""))
+    print(f"  limits acted on {stats['limited']} axis-ticks; bad inputs refused: {stats['bad_input']}")
+    if args.output:
+        print(f"  output {args.output}: {stats['sink_frames']} ticks sent, {stats['sink_bytes']} bytes, "
+              f"{stats['sink_errors']} lost")
+    c = stats["compute"]
+    print(f"  tick compute [us]: p50 {c['p50_us']:.2f}  p99 {c['p99_us']:.2f}  "
+          f"p99.9 {c['p999_us']:.2f}  max {c['max_us']:.2f}")
+    if args.realtime:
+        w = stats["wake"]
+        print(f"  wake latency [us]: p50 {w['p50_us']:.1f}  p99 {w['p99_us']:.1f}  "
+              f"p99.9 {w['p999_us']:.1f}  max {w['max_us']:.1f}; overruns {stats['overruns']}")
+    cmd = records["command"]
+    print(f"  {'axis':<18}{'unit':>5}{'min':>10}{'max':>10}{'top speed':>11}{'limit':>9}")
+    for j, axis in enumerate(config.axes):
+        speed = np.max(np.abs(np.diff(cmd[:, j]))) / config.tick_period if len(cmd) > 1 else 0.0
+        print(f"  {axis.name:<18}{axis.unit:>5}{cmd[:, j].min():>10.4f}{cmd[:, j].max():>10.4f}"
+              f"{speed:>11.4f}{axis.max_speed:>9.3g}")
+    return 0
+
+
+def cmd_bench(args, rest: list[str]) -> int:
+    module = importlib.import_module(f"marionette.bench.{args.bench}")
+    return module.main(rest)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="marionette", description=__doc__.split("\n\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    def figure_args(p):
+        p.add_argument("show", nargs="?", help="show file (.csv or .npz); default: the bundled demo")
+        p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
+        p.add_argument("--on-limits", choices=LIMIT_POLICIES, default="error",
+                       help="what to do with taught positions outside an axis's limits")
+
+    p = sub.add_parser("play", help="play a show through the engine and print a summary")
+    figure_args(p)
+    p.add_argument("--realtime", action="store_true", help="run the real-time loop (default: step mode)")
+    p.add_argument("--ticks", type=int, help="ticks to run (default: the whole show)")
+    p.add_argument("--rate", type=float, default=1.0, help="playback rate [show ticks per tick]")
+    p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag")
+    p.add_argument("--interpolation", choices=sorted(INTERPOLATIONS), default="cubic")
+    p.add_argument("--priority", type=int, default=80, help="SCHED_FIFO priority (0: normal)")
+    p.add_argument("--record", help="write the flight record to this file")
+    p.add_argument("--output", help="write the setpoint frames to this file or device")
+    p.set_defaults(run=cmd_play)
+
+    p = sub.add_parser("check", help="validate a figure and a show")
+    figure_args(p)
+    p.set_defaults(run=cmd_check)
+
+    p = sub.add_parser("bench", help="benchmarks: " + ", ".join(BENCHES), add_help=False)
+    p.add_argument("bench", choices=BENCHES)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser()
+    args, rest = parser.parse_known_args(argv)
+    try:
+        if args.command == "bench":
+            return cmd_bench(args, rest)
+        if rest:
+            parser.error(f"unrecognized arguments: {' '.join(rest)}")
+        return args.run(args)
+    except MarionetteError as exc:
+        print(f"marionette: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

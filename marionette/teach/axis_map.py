@@ -1,0 +1,168 @@
+"""Map generalized coordinates to the marionette's figure axes.
+
+Input: poses (K, 6) = ``(x0, y0, z0 [m], phi, theta, psi [rad])`` per sample, with
+``x0, y0`` already compressed into the marionette's stage coordinates
+(:class:`marionette.teach.filters.SoftLimit`).  Output: ``{axis name: (K,) array}``
+in SI units.  Axis names are configuration, never hard-coded in the computation.
+
+* Horizontal axes: ``x = x0``, ``y = y0`` [m].
+* Rotation axis: ``rot = unwrap(psi) + rotation_offset`` [rad] (continuous through
+  full turns).
+* String winches: each winch ``j`` holds the puppet at a point ``p_j`` of the body frame
+  (the rucksack frame: origin at the LED square centre, x forward, y left, z up) [m].
+  Its value is ``gain_j * dz_j`` with the vertical displacement of that point
+  ``dz_j = z_gain (z0 - z_ref) + (R' p_j)_z - p_jz`` [m], where
+  ``(R' p)_z = -sin(theta') p_x + cos(theta') sin(phi') p_y + cos(theta') cos(phi') p_z``
+  with ``phi' = tilt_gain phi`` and ``theta' = tilt_gain theta`` (yaw does not change
+  heights).  Positive = the point rises (string shortens) for ``gain = 1``.
+* Floodlights: pan/tilt [rad] aimed from the light position at the puppet point
+  ``(x, y, target_height + z_gain (z0 - z_ref))`` [m]: ``pan = atan2(dy, dx) - pan_offset``
+  (unwrapped), ``tilt = atan2(dz, hypot(dx, dy))`` (negative = below the light).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+
+@dataclass
+class Winch:
+    """One string winch."""
+
+    name: str                                 # axis name
+    attach: tuple[float, float, float]        # attachment point, body frame [m]
+    gain: float = 1.0                         # axis value per vertical displacement [m/m]
+
+
+@dataclass
+class Floodlight:
+    """One tracking floodlight (two axes)."""
+
+    pan_name: str                             # pan axis name
+    tilt_name: str                            # tilt axis name
+    position: tuple[float, float, float]      # light position, stage frame [m]
+    target_height: float = 1.0                # aim point height at z0 = z_ref [m]
+    pan_offset: float = 0.0                   # direction of pan = 0, from +x to +y [rad]
+
+
+def default_winches() -> list[Winch]:
+    """Nine winches on a plausible figure (body frame: x forward, y left, z up) [m]."""
+    return [
+        Winch("head", (0.0, 0.0, 0.35)),
+        Winch("shoulder_l", (0.0, 0.20, 0.10)),
+        Winch("shoulder_r", (0.0, -0.20, 0.10)),
+        Winch("hand_l", (0.10, 0.45, -0.30)),
+        Winch("hand_r", (0.10, -0.45, -0.30)),
+        Winch("knee_l", (0.10, 0.12, -0.90)),
+        Winch("knee_r", (0.10, -0.12, -0.90)),
+        Winch("foot_l", (0.0, 0.12, -1.35)),
+        Winch("foot_r", (0.0, -0.12, -1.35)),
+    ]
+
+
+def default_lights() -> list[Floodlight]:
+    """Two floodlights in front of the 1.5 m x 1.5 m stage [m]."""
+    return [
+        Floodlight("light1_pan", "light1_tilt", (-2.0, -3.0, 4.0)),
+        Floodlight("light2_pan", "light2_tilt", (2.0, -3.0, 4.0)),
+    ]
+
+
+@dataclass
+class AxisMap:
+    """Configuration of the map from generalized coordinates to axes."""
+
+    x_name: str = "x"
+    y_name: str = "y"
+    rotation_name: str = "rot"
+    rotation_offset: float = 0.0              # added to the unwrapped yaw [rad]
+    z_gain: float = 1.0                       # vertical scale dancer -> puppet [m/m]
+    tilt_gain: float = 1.0                    # scale of roll and pitch [rad/rad]
+    z_ref: float | None = None                # z0 of zero winch displacement [m]; None = mean
+    winches: list[Winch] = field(default_factory=default_winches)
+    lights: list[Floodlight] = field(default_factory=default_lights)
+
+    def __post_init__(self) -> None:
+        names = self.axis_names()
+        dup = sorted({n for n in names if names.count(n) > 1})
+        if dup:
+            raise ValueError(f"axis names must be unique; duplicated: {dup}")
+
+    def axis_names(self) -> list[str]:
+        """All output axis names, in output order."""
+        names = [self.x_name, self.y_name, self.rotation_name]
+        names += [w.name for w in self.winches]
+        for light in self.lights:
+            names += [light.pan_name, light.tilt_name]
+        return names
+
+    def to_dict(self) -> dict:
+        """Plain dict (lists/floats/strings; TOML friendly except a ``None`` z_ref is dropped)."""
+        d = asdict(self)
+        if d["z_ref"] is None:
+            del d["z_ref"]
+        for w in d["winches"]:
+            w["attach"] = list(w["attach"])
+        for light in d["lights"]:
+            light["position"] = list(light["position"])
+        return d
+
+    @classmethod
+    def from_dict(cls, data: Mapping) -> "AxisMap":
+        """Inverse of :meth:`to_dict`; unknown keys raise ``ValueError``."""
+        data = dict(data)
+        known = {f for f in cls.__dataclass_fields__}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"unknown axis map key(s) {unknown}; known: {sorted(known)}")
+        if "winches" in data:
+            data["winches"] = [_build(Winch, w, "attach") for w in data["winches"]]
+        if "lights" in data:
+            data["lights"] = [_build(Floodlight, w, "position") for w in data["lights"]]
+        return cls(**data)
+
+
+def _build(kind, item: Mapping, vector_key: str):
+    unknown = sorted(set(item) - set(kind.__dataclass_fields__))
+    if unknown:
+        raise ValueError(f"unknown {kind.__name__} key(s) {unknown}")
+    item = dict(item)
+    vec = tuple(float(v) for v in item[vector_key])
+    if len(vec) != 3:
+        raise ValueError(f"{kind.__name__} {vector_key} must have 3 entries [m], got {vec}")
+    item[vector_key] = vec
+    return kind(**item)
+
+
+def map_axes(pose, config: AxisMap | None = None) -> dict[str, np.ndarray]:
+    """Axis trajectories ``{name: (K,)}`` for poses (K, 6) (see module docstring)."""
+    config = AxisMap() if config is None else config
+    q = np.asarray(pose, float)
+    if q.ndim != 2 or q.shape[1] != 6:
+        raise ValueError(f"pose must have shape (K, 6), got {q.shape}")
+    if not np.all(np.isfinite(q)):
+        raise ValueError("pose contains NaN/inf; bridge gaps before mapping to axes")
+    x0, y0, z0, phi, theta, psi = q.T
+    z_ref = float(np.mean(z0)) if config.z_ref is None else float(config.z_ref)
+    lift = config.z_gain * (z0 - z_ref)                  # vertical displacement [m]
+    out: dict[str, np.ndarray] = {
+        config.x_name: x0.copy(),
+        config.y_name: y0.copy(),
+        config.rotation_name: np.unwrap(psi) + config.rotation_offset,
+    }
+    f = config.tilt_gain * phi
+    t = config.tilt_gain * theta
+    for w in config.winches:
+        px, py, pz = w.attach
+        height = -np.sin(t) * px + np.cos(t) * np.sin(f) * py + np.cos(t) * np.cos(f) * pz
+        out[w.name] = w.gain * (lift + height - pz)
+    for light in config.lights:
+        lx, ly, lz = light.position
+        dx, dy = x0 - lx, y0 - ly
+        dz = light.target_height + lift - lz
+        out[light.pan_name] = np.unwrap(np.arctan2(dy, dx) - light.pan_offset)
+        out[light.tilt_name] = np.arctan2(dz, np.hypot(dx, dy))
+    return out

@@ -1,0 +1,48 @@
+"""Shared fixtures: small figures and shows made on the spot."""
+import numpy as np
+import pytest
+
+from marionette.config import config_from_dict
+from marionette.show import Show
+
+
+def figure_dict(n_axes=3, period=0.02, **overrides):
+    """A valid figure document with n_axes axes; overrides apply to every axis."""
+    axes = []
+    for j in range(n_axes):
+        axis = dict(name=f"a{j}", node=1, channel=j, unit="m", min=-1.0, max=1.0, home=0.0,
+                    max_speed=2.0, max_accel=20.0, dead_time=0.04, time_constant=0.06,
+                    scale=1000.0, offset=0.0)
+        axis.update(overrides)
+        axes.append(axis)
+    return {"figure": {"name": "test", "tick_period": period}, "axis": axes}
+
+
+def make_figure(n_axes=3, period=0.02, **overrides):
+    return config_from_dict(figure_dict(n_axes, period, **overrides), "test.toml")
+
+
+def make_show(config, positions, loudness=None):
+    positions = np.asarray(positions, dtype=float)
+    if loudness is None:
+        loudness = np.zeros(positions.shape[1])
+    return Show(axis_names=config.axis_names, units=[a.unit for a in config.axes],
+                positions=positions, loudness=np.asarray(loudness, dtype=float),
+                tick_period=config.tick_period)
+
+
+def smooth_dance(config, ticks, rng, fraction=0.4):
+    """Random slow sinusoids inside each axis's limits and comfortably within its speed."""
+    t = np.arange(ticks) * config.tick_period
+    out = np.empty((len(config.axes), ticks))
+    for j, a in enumerate(config.axes):
+        f = rng.uniform(0.1, 0.4)                                   # [Hz]
+        amp = min(fraction * (a.max - a.min) / 2, 0.3 * a.max_speed / (2 * np.pi * f),
+                  0.3 * a.max_accel / (2 * np.pi * f) ** 2)
+        out[j] = (a.min + a.max) / 2 + amp * np.sin(2 * np.pi * f * t + rng.uniform(0, 6.28))
+    return out
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(20261122)
