@@ -47,7 +47,8 @@ def cmd_play(args) -> int:
         with Engine(config, show, lead=args.lead, interpolation=args.interpolation,
                     output=output_fd, record=args.record or True, rate=args.rate) as engine:
             if args.realtime:
-                engine.start(priority=args.priority, max_ticks=n)
+                engine.start(priority=args.priority, cpu=args.cpu, lock_memory=args.lock_memory,
+                             max_ticks=n)
                 engine.wait()
                 engine.stop()
             else:
@@ -108,6 +109,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag")
     p.add_argument("--interpolation", choices=sorted(INTERPOLATIONS), default="cubic")
     p.add_argument("--priority", type=int, default=80, help="SCHED_FIFO priority (0: normal)")
+    p.add_argument("--cpu", type=int, help="pin the real-time thread to this CPU")
+    p.add_argument("--lock-memory", action="store_true", help="mlockall before starting")
     p.add_argument("--record", help="write the flight record to this file")
     p.add_argument("--output", help="write the setpoint frames to this file or device")
     p.set_defaults(run=cmd_play)

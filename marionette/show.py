@@ -200,14 +200,17 @@ def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") ->
     if not math.isclose(show.tick_period, config.tick_period, rel_tol=1e-9):
         raise ShowError(f"{show.path}: tick_period {show.tick_period!r} s does not match "
                         f"{config.source}: {config.tick_period!r} s")
-    unknown = [n for n in show.axis_names if n not in config.axis_names]
+    figure_names = config.axis_names
+    row_of = {name: j for j, name in enumerate(show.axis_names)}
+    known = set(figure_names)
+    unknown = [n for n in show.axis_names if n not in known]
     if unknown:
         raise ShowError(f"{show.path}: unknown axis {unknown[0]!r} (not in {config.source}; "
-                        f"known: {', '.join(config.axis_names)})")
-    missing = [n for n in config.axis_names if n not in show.axis_names]
+                        f"known: {', '.join(figure_names)})")
+    missing = [n for n in figure_names if n not in row_of]
     if missing:
         raise ShowError(f"{show.path}: no trajectory for axis {missing[0]!r} of {config.source}")
-    order = [show.axis_names.index(n) for n in config.axis_names]
+    order = [row_of[n] for n in figure_names]
     positions = show.positions[order].copy()
     changes = list(show.changes)
     for j, axis in enumerate(config.axes):
@@ -235,7 +238,7 @@ def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") ->
             positions[j] = np.clip(axis.min + (x - lo) * gain, axis.min, axis.max)
             changes.append(f"axis {axis.name!r}: compressed range [{lo:.6g}, {hi:.6g}] into "
                            f"[{axis.min!r}, {axis.max!r}] {axis.unit} (gain {gain:.6g})")
-    return replace(show, axis_names=list(config.axis_names),
+    return replace(show, axis_names=list(figure_names),
                    units=[a.unit for a in config.axes], positions=positions, changes=changes)
 
 
