@@ -22,14 +22,28 @@ if sanitize:
     compile_args += flags
     link_args += flags
 
-core = Extension(
-    "marionette._core",
-    sources=["marionette/_core.pyx"] + sorted(glob("ext/*.c")) + sorted(glob("firmware_protocol/*.c")),
-    include_dirs=["ext", "firmware_protocol", numpy.get_include()],
-    define_macros=[("_POSIX_C_SOURCE", "200809L"), ("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")]
-    + ([] if debug else [("NDEBUG", None)]),
-    extra_compile_args=compile_args,
-    extra_link_args=link_args,
-)
 
-setup(ext_modules=cythonize([core], compiler_directives={"language_level": "3"}))
+
+def extension(name: str, pyx: str, c_sources: list[str]) -> Extension:
+    return Extension(
+        name,
+        sources=[pyx] + c_sources,
+        include_dirs=["ext", "firmware_protocol", numpy.get_include()],
+        define_macros=[("_POSIX_C_SOURCE", "200809L"), ("NPY_NO_DEPRECATED_API", "NPY_1_7_API_VERSION")]
+        + ([] if debug else [("NDEBUG", None)]),
+        extra_compile_args=compile_args,
+        extra_link_args=link_args,
+    )
+
+
+extensions = [
+    # the tick engine and everything it runs
+    extension("marionette._core", "marionette/_core.pyx",
+              sorted(set(glob("ext/*.c")) - {"ext/mar_shape.c"}) + sorted(glob("firmware_protocol/*.c"))),
+    # the offline pragmatic filter (timed parabolic moves between extrema)
+    extension("marionette._shape", "marionette/_shape.pyx", ["ext/mar_shape.c"]),
+]
+
+import os.path  # TEMP while the shaping module is written
+extensions = [x for x in extensions if os.path.exists(x.sources[0])]
+setup(ext_modules=cythonize(extensions, compiler_directives={"language_level": "3"}))

@@ -25,6 +25,20 @@ struct mar_engine {
     double live_loudness;
     int64_t tick;
     uint64_t bad_input_seen;        /* bad_input at the previous tick */
+    int mode;                       /* enum mar_mode */
+    int was_playing;                /* the previous tick played the show */
+    int move_kind;                  /* enum mar_request being carried out */
+    double move_time;               /* time since the moves were planned [s] */
+    double move_duration;           /* longest of them [s] */
+    mar_move *moves;                /* per axis */
+    uint32_t request_seen;          /* sequence number of the last request taken */
+    double *request_copy;           /* the tick's copy of the request targets */
+
+    /* move request mailbox: a seqlock written by one Python thread */
+    _Atomic uint32_t request_seq;
+    _Atomic int request_kind;
+    _Atomic int request_sync;
+    double *request_targets;
 
     /* requests from other threads */
     _Atomic double rate_request;
@@ -98,9 +112,12 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
     e->cmd = malloc(n_axes * sizeof(double));
     e->vel = calloc(n_axes, sizeof(double));
     e->snap_cmd = calloc(n_axes, sizeof(double));
+    e->moves = calloc(n_axes, sizeof *e->moves);
+    e->request_copy = calloc(n_axes, sizeof(double));
+    e->request_targets = calloc(n_axes, sizeof(double));
     mar_axis_address *addr = malloc(n_axes * sizeof *addr);
     int ok = e->axes && e->show && e->loudness && e->lead_s && e->feed_forward && e->cmd
-          && e->vel && e->snap_cmd && addr;
+          && e->vel && e->snap_cmd && e->moves && e->request_copy && e->request_targets && addr;
     if (ok) {
         memcpy(e->axes, axes, n_axes * sizeof *axes);
         memcpy(e->show, show, n_axes * n_ticks * sizeof *show);
@@ -129,6 +146,7 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
     }
     e->rate = 1.0;
     e->live_loudness = NAN;
+    e->mode = opt->start_holding ? MAR_MODE_HOLD : MAR_MODE_SHOW;
     atomic_init(&e->rate_request, 1.0);
     atomic_init(&e->seek_request, 0.0);
     mar_hist_reset(&e->wake);
@@ -154,6 +172,9 @@ void mar_engine_destroy(mar_engine *e)
     free(e->cmd);
     free(e->vel);
     free(e->snap_cmd);
+    free(e->moves);
+    free(e->request_copy);
+    free(e->request_targets);
     free(e);
 }
 
@@ -176,6 +197,58 @@ static void publish_snapshot(mar_engine *e, const mar_record *rec)
     atomic_store_explicit(&e->snap_seq, seq + 2, memory_order_release);
 }
 
+/* Where axis j should be for playback position p at rate r: the show
+ * sampled ahead by the axis's lead, plus the lag feed-forward. */
+static double show_target(const mar_engine *e, size_t j, double p, double r)
+{
+    const double T = e->opt.period;
+    double slope;                                       /* [unit/show tick] */
+    double ahead = p + r * e->lead_s[j] / T;            /* [show ticks] */
+    double x = mar_sample(e->show + j * e->n_ticks, e->n_ticks, ahead, e->opt.interp, &slope);
+    return x + e->feed_forward[j] * slope * r / T;
+}
+
+/* Take a new move request, if one came, and plan every axis's move from
+ * its present command and velocity. */
+static void take_request(mar_engine *e)
+{
+    uint32_t s1 = atomic_load_explicit(&e->request_seq, memory_order_acquire);
+    if ((s1 & 1u) || s1 == e->request_seen)
+        return;                                         /* none, or being written: next tick */
+    int kind = atomic_load_explicit(&e->request_kind, memory_order_relaxed);
+    int sync = atomic_load_explicit(&e->request_sync, memory_order_relaxed);
+    memcpy(e->request_copy, e->request_targets, e->n_axes * sizeof(double));
+    atomic_thread_fence(memory_order_acquire);
+    if (atomic_load_explicit(&e->request_seq, memory_order_relaxed) != s1)
+        return;                                         /* overwritten meanwhile: next tick */
+    e->request_seen = s1;
+
+    double longest = 0.0;
+    for (size_t j = 0; j < e->n_axes; j++) {
+        const mar_limits *l = &e->axes[j].limits;
+        double x0 = e->cmd[j], v0 = e->vel[j];
+        double target = kind == MAR_REQ_BLEND ? show_target(e, j, e->position, e->rate)
+                      : kind == MAR_REQ_GOTO ? e->request_copy[j] : NAN;
+        if (!isfinite(target))                          /* stop where braking ends */
+            target = x0 + v0 * fabs(v0) / (2.0 * l->max_accel);
+        target = target < l->pos_min ? l->pos_min : target > l->pos_max ? l->pos_max : target;
+        double d = mar_move_plan(&e->moves[j], x0, v0, target, l->max_speed, l->max_accel);
+        if (d > longest)
+            longest = d;
+    }
+    if (sync && kind != MAR_REQ_STOP) {                 /* stretch the others to the longest */
+        for (size_t j = 0; j < e->n_axes; j++) {
+            const mar_limits *l = &e->axes[j].limits;
+            mar_move *m = &e->moves[j];
+            mar_move_plan_timed(m, m->x0, m->v0, m->target, l->max_speed, l->max_accel, longest);
+        }
+    }
+    e->mode = MAR_MODE_MOVE;
+    e->move_kind = kind;
+    e->move_time = 0.0;
+    e->move_duration = longest;
+}
+
 void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
 {
     const double T = e->opt.period;
@@ -183,8 +256,9 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     uint32_t flags = 0;
 
     /* 1. playback clock: advance by the rate in force since the last tick,
-     *    then take requests. Missed periods still count (real time). */
-    if (e->tick > 0)
+     *    then take requests. Missed periods still count (real time). The
+     *    clock waits while moves or a hold drive the figure. */
+    if (e->was_playing)
         e->position += e->rate * (double)elapsed_periods;
     e->rate = atomic_load_explicit(&e->rate_request, memory_order_relaxed);
     if (atomic_exchange_explicit(&e->seek_pending, 0, memory_order_acquire))
@@ -201,21 +275,32 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         e->bad_input_seen = bad;
         flags |= MAR_FLAG_BAD_INPUT;
     }
+    take_request(e);
+    if (e->mode == MAR_MODE_MOVE)
+        e->move_time += T * (double)elapsed_periods;
 
-    /* 2. per axis: sample ahead by the behaviour model, then hard limits */
+    /* 2. per axis: the show sampled ahead by the behaviour model, or the
+     *    move's profile, or the held pose; then the hard limits */
     const double p = e->position, r = e->rate;
     uint32_t limited = 0;
     for (size_t j = 0; j < e->n_axes; j++) {
-        double slope;                                       /* [unit/show tick] */
-        double ahead = p + r * e->lead_s[j] / T;            /* [show ticks] */
-        double x = mar_sample(e->show + j * e->n_ticks, e->n_ticks, ahead, e->opt.interp, &slope);
-        double target = x + e->feed_forward[j] * slope * r / T;
+        double target, v;
+        if (e->mode == MAR_MODE_SHOW)
+            target = show_target(e, j, p, r);
+        else if (e->mode == MAR_MODE_MOVE)
+            target = mar_move_eval(&e->moves[j], e->move_time, &v);
+        else
+            target = e->cmd[j];
         int hit;
         e->cmd[j] = mar_limit_step(&e->axes[j].limits, T, e->cmd[j], e->vel[j], target, &e->vel[j], &hit);
         limited += (uint32_t)hit;
     }
     if (limited)
         flags |= MAR_FLAG_LIMITED;
+    e->was_playing = e->mode == MAR_MODE_SHOW;
+    flags |= e->mode == MAR_MODE_MOVE ? MAR_FLAG_MOVING : e->mode == MAR_MODE_HOLD ? MAR_FLAG_HOLDING : 0u;
+    if (e->mode == MAR_MODE_MOVE && e->move_time >= e->move_duration)  /* arrived: next tick */
+        e->mode = e->move_kind == MAR_REQ_BLEND ? MAR_MODE_SHOW : MAR_MODE_HOLD;
 
     double slope;
     mar_record rec = {
@@ -285,6 +370,21 @@ int mar_engine_push_loudness(mar_engine *e, double value)
         return -EINVAL;
     }
     return mar_ring_push(&e->loudness_in, &value, sizeof value);
+}
+
+int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized)
+{
+    if (kind != MAR_REQ_GOTO && kind != MAR_REQ_BLEND && kind != MAR_REQ_STOP)
+        return -EINVAL;
+    uint32_t seq = atomic_load_explicit(&e->request_seq, memory_order_relaxed);
+    atomic_store_explicit(&e->request_seq, seq + 1, memory_order_relaxed);   /* odd: writing */
+    atomic_thread_fence(memory_order_release);
+    atomic_store_explicit(&e->request_kind, kind, memory_order_relaxed);
+    atomic_store_explicit(&e->request_sync, synchronized != 0, memory_order_relaxed);
+    if (kind == MAR_REQ_GOTO)
+        memcpy(e->request_targets, targets, e->n_axes * sizeof(double));
+    atomic_store_explicit(&e->request_seq, seq + 2, memory_order_release);
+    return 0;
 }
 
 int mar_engine_snapshot(const mar_engine *e, mar_record *rec, double *commands)

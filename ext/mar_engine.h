@@ -12,6 +12,7 @@
 
 #include "mar_hist.h"
 #include "mar_limits.h"
+#include "mar_move.h"
 #include "mar_ring.h"
 #include "mar_sample.h"
 #include "mar_sink.h"
@@ -38,12 +39,29 @@ typedef struct {
     int interp;                 /* enum mar_interp */
     size_t record_slots;        /* flight recorder capacity [ticks]; 0 = no recorder */
     size_t loudness_slots;      /* live loudness input capacity [frames] */
+    int start_holding;          /* 1: start holding the start pose (mode HOLD), 0: playing the show */
 } mar_engine_options;
+
+/* Who drives the commands. */
+enum mar_mode {
+    MAR_MODE_SHOW = 0,          /* the taught show, the playback clock runs */
+    MAR_MODE_MOVE = 1,          /* online moves; the playback clock waits */
+    MAR_MODE_HOLD = 2,          /* standing still; the playback clock waits */
+};
+
+/* Move requests (mar_engine_request). */
+enum mar_request {
+    MAR_REQ_GOTO = 1,           /* move to the given pose, then hold; NaN targets: stop where possible */
+    MAR_REQ_BLEND = 2,          /* move to the show's pose at the playback position, then play */
+    MAR_REQ_STOP = 3,           /* decelerate to rest at the acceleration limit (e-stop ramp), then hold */
+};
 
 /* Flags in a record. */
 #define MAR_FLAG_LIMITED   1u   /* some axis could not follow its target this tick */
 #define MAR_FLAG_END       2u   /* the playback position reached the end of the show */
 #define MAR_FLAG_BAD_INPUT 4u   /* a non-finite rate, seek or loudness was refused */
+#define MAR_FLAG_MOVING    8u   /* online moves drive the commands */
+#define MAR_FLAG_HOLDING  16u   /* the figure holds a pose */
 
 /* A flight-recorder record, followed in memory by n_axes commands [unit]. */
 typedef struct {
@@ -87,6 +105,12 @@ int mar_engine_step(mar_engine *e, uint64_t n);
 int mar_engine_set_rate(mar_engine *e, double rate);      /* [show ticks per tick] */
 int mar_engine_seek(mar_engine *e, double position);      /* [show ticks] */
 int mar_engine_push_loudness(mar_engine *e, double value);
+
+/* Ask for a move (enum mar_request); targets [unit] has n_axes values for
+ * MAR_REQ_GOTO and is ignored otherwise. synchronized: all axes arrive
+ * together. One writer at a time; a newer request replaces one the tick has
+ * not taken yet, and a request while moving re-plans from where the figure is. */
+int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized);
 
 /* Consistent copy of the latest tick (seqlock); commands needs n_axes
  * doubles. -EAGAIN if no tick ran yet. */

@@ -50,6 +50,16 @@ cdef extern from "mar_sink.h" nogil:
     size_t mar_ring_pop(mar_ring *r, void *dst, size_t max_items)
 
 
+cdef extern from "mar_move.h" nogil:
+    ctypedef struct mar_move:
+        double target
+    double mar_move_plan(mar_move *m, double x0, double v0, double target, double vmax, double amax)
+    int mar_move_plan_timed(mar_move *m, double x0, double v0, double target, double vmax,
+                            double amax, double duration)
+    double mar_move_duration(const mar_move *m)
+    double mar_move_eval(const mar_move *m, double t, double *v)
+
+
 cdef extern from "mar_engine.h" nogil:
     ctypedef struct mar_axis:
         mar_limits limits
@@ -63,6 +73,7 @@ cdef extern from "mar_engine.h" nogil:
         int interp
         size_t record_slots
         size_t loudness_slots
+        int start_holding
     ctypedef struct mar_record:
         int64_t tick
         int64_t time_ns
@@ -92,6 +103,7 @@ cdef extern from "mar_engine.h" nogil:
     int mar_engine_set_rate(mar_engine *e, double rate)
     int mar_engine_seek(mar_engine *e, double position)
     int mar_engine_push_loudness(mar_engine *e, double value)
+    int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized)
     int mar_engine_snapshot(const mar_engine *e, mar_record *rec, double *commands)
     size_t mar_engine_record_size(const mar_engine *e)
     size_t mar_engine_drain_records(mar_engine *e, void *dst, size_t max)

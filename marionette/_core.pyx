@@ -25,6 +25,11 @@ SINK_RING = MAR_SINK_RING
 FLAG_LIMITED = 1        # MAR_FLAG_*
 FLAG_END = 2
 FLAG_BAD_INPUT = 4
+FLAG_MOVING = 8
+FLAG_HOLDING = 16
+REQUEST_GOTO = 1        # enum mar_request
+REQUEST_BLEND = 2
+REQUEST_STOP = 3
 
 # Fields of one axis, in SI units, as the C mar_axis takes them.
 AXIS_DTYPE = np.dtype([
@@ -58,7 +63,7 @@ cdef class CoreEngine:
     def __cinit__(self, double period, int lead_mode, int interp, axes,
                   cnp.ndarray[cnp.float64_t, ndim=2, mode="c"] show,
                   cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] loudness,
-                  size_t record_slots, size_t loudness_slots):
+                  size_t record_slots, size_t loudness_slots, bint start_holding=False):
         axes = np.ascontiguousarray(axes, dtype=AXIS_DTYPE)
         cdef size_t n_axes = axes.shape[0]
         if show.shape[0] != n_axes or loudness.shape[0] != show.shape[1]:
@@ -86,6 +91,7 @@ cdef class CoreEngine:
         opt.interp = interp
         opt.record_slots = record_slots
         opt.loudness_slots = loudness_slots
+        opt.start_holding = start_holding
         cdef int status = 0
         self.engine = mar_engine_create(&opt, c_axes, n_axes, &show[0, 0], show.shape[1],
                                         &loudness[0], &status)
@@ -148,6 +154,14 @@ cdef class CoreEngine:
     def push_loudness(self, double value):
         return mar_engine_push_loudness(self.engine, value)
 
+    def request(self, int kind, targets=None, bint synchronized=False):
+        """Move request (REQUEST_*); targets: n_axes positions [unit] for REQUEST_GOTO."""
+        cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] t = np.ascontiguousarray(
+            np.full(self.n_axes, np.nan) if targets is None else targets, dtype=np.float64)
+        if t.shape[0] != self.n_axes:
+            raise ValueError(f"{t.shape[0]} targets for {self.n_axes} axes")
+        return mar_engine_request(self.engine, kind, &t[0], synchronized)
+
     def set_sink(self, int kind, int fd, size_t ring_slots):
         return mar_sink_set(mar_engine_sink(self.engine), kind, fd, ring_slots)
 
@@ -198,6 +212,42 @@ cdef class CoreEngine:
         cdef const mar_hist *h = (mar_engine_wake_hist(self.engine) if which == "wake"
                                   else mar_engine_compute_hist(self.engine))
         return [mar_hist_quantile(h, q) for q in qs], mar_hist_count(h), mar_hist_max(h)
+
+
+def plan_move(double x0, double v0, double target, double max_speed, double max_accel,
+              times=None, duration=None):
+    """An online move from position x0 [unit] and velocity v0 [unit/s] to
+    target at rest: time-optimal, or lasting exactly duration [s] when given.
+    Returns (duration [s], ok, positions, velocities) with the profile
+    sampled at times [s] (empty arrays without times); ok is False when the
+    timed profile was impossible and the time-optimal one was used."""
+    cdef mar_move m
+    cdef int status = 0
+    if duration is None:
+        mar_move_plan(&m, x0, v0, target, max_speed, max_accel)
+    else:
+        status = mar_move_plan_timed(&m, x0, v0, target, max_speed, max_accel, duration)
+    cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] t = np.ascontiguousarray(
+        [] if times is None else times, dtype=np.float64)
+    cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] x = np.empty(t.shape[0])
+    cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] v = np.empty(t.shape[0])
+    cdef Py_ssize_t i
+    for i in range(t.shape[0]):
+        x[i] = mar_move_eval(&m, t[i], &v[i])
+    return mar_move_duration(&m), status == 0, x, v
+
+
+def move_durations(double[::1] x0, double[::1] v0, double[::1] target, double[::1] max_speed,
+                   double[::1] max_accel):
+    """Time-optimal durations [s] of many moves at once (for benchmarks)."""
+    cdef Py_ssize_t n = x0.shape[0], i
+    out = np.empty(n)
+    cdef double[::1] d = out
+    cdef mar_move m
+    with nogil:
+        for i in range(n):
+            d[i] = mar_move_plan(&m, x0[i], v0[i], target[i], max_speed[i], max_accel[i])
+    return out
 
 
 def encode_setpoints(uint32_t tick, nodes, channels, counts):

@@ -74,12 +74,15 @@ class Engine:
     fileno() (the tick writes to it itself, no GIL); or any object with
     write(bytes) (a Python thread drains a ring into it). record: None,
     True (keep records in memory) or a file path (flight record).
-    The figure is assumed to stand at the show's first pose, at rest.
+    start_pose: where the figure stands, at rest, when the engine is made:
+    None (default) means at the show's first pose, and the show plays from
+    the first tick; "home" or a pose {axis: position} means there, holding,
+    until blend_in() moves it into the show.
     """
 
     def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
                  interpolation: str = "cubic", output=None, record=None, rate: float = 1.0,
-                 on_limits: str = "error"):
+                 on_limits: str = "error", start_pose=None):
         if lead not in LEAD_MODES:
             raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
         if interpolation not in INTERPOLATIONS:
@@ -88,11 +91,13 @@ class Engine:
         self.config = config
         self.show = fit_to_figure(show, config, on_limits)
         positions = np.ascontiguousarray(self.show.positions, dtype=np.float64)
+        start = positions[:, 0] if start_pose is None else self._pose(start_pose, fill=None)
         self._core = _core.CoreEngine(
             config.tick_period, LEAD_MODES[lead], INTERPOLATIONS[interpolation],
-            axis_table(config, positions[:, 0]), positions,
+            axis_table(config, start), positions,
             np.ascontiguousarray(self.show.loudness, dtype=np.float64),
-            RECORD_SLOTS if record else 0, LOUDNESS_SLOTS)
+            RECORD_SLOTS if record else 0, LOUDNESS_SLOTS, start_pose is not None)
+        self._request_lock = threading.Lock()
         self.recorder = None
         if record:
             path = None if record is True else Path(record)
@@ -242,6 +247,58 @@ class Engine:
         if status == -errno.EINVAL:
             raise ValueError(f"live loudness {value!r} refused: it must be finite and >= 0")
         _raise_for(status, "push_loudness")
+
+    def _pose(self, pose, fill) -> np.ndarray:
+        """A pose [unit] per axis from "home" or {axis: position}; axes not
+        named get fill (None: every axis must be named)."""
+        if isinstance(pose, str):
+            if pose != "home":
+                raise ValueError(f"unknown pose {pose!r} (use 'home' or a mapping axis -> position)")
+            pose = {a.name: a.home for a in self.config.axes}
+        unknown = set(pose) - set(self.config.axis_names)
+        if unknown:
+            raise ValueError(f"pose names unknown axis {sorted(unknown)[0]!r} "
+                             f"(known: {', '.join(self.config.axis_names)})")
+        out = np.empty(len(self.config.axes))
+        for j, axis in enumerate(self.config.axes):
+            if axis.name not in pose:
+                if fill is None:
+                    raise ValueError(f"pose has no position for axis {axis.name!r}")
+                out[j] = fill
+                continue
+            x = float(pose[axis.name])
+            if not axis.min <= x <= axis.max:
+                raise ValueError(f"pose: axis {axis.name!r} position {x!r} {axis.unit} is outside "
+                                 f"its limits [{axis.min!r}, {axis.max!r}]")
+            out[j] = x
+        return out
+
+    def _request(self, kind: int, targets=None, synchronized: bool = False) -> None:
+        with self._request_lock:
+            _raise_for(self._core.request(kind, targets, synchronized), "move request")
+
+    def move_to(self, pose, *, synchronized: bool = False) -> None:
+        """Move to a pose ("home" or {axis: position [unit]}) by time-optimal
+        limited moves from wherever the figure is, then hold. Axes left out
+        stop where their braking ends. synchronized: all axes arrive
+        together. Calling again while moving re-plans from the present state."""
+        self._request(_core.REQUEST_GOTO, self._pose(pose, fill=np.nan), synchronized)
+
+    def home(self, *, synchronized: bool = True) -> None:
+        """move_to("home")."""
+        self.move_to("home", synchronized=synchronized)
+
+    def blend_in(self, position: float | None = None, *, synchronized: bool = True) -> None:
+        """Move from wherever the figure is to the show's pose at position
+        [show ticks] (default: where playback stands), then play from there."""
+        if position is not None:
+            self.seek(position)
+        self._request(_core.REQUEST_BLEND, None, synchronized)
+
+    def stop_motion(self) -> None:
+        """Decelerate every axis to rest at its acceleration limit (the e-stop
+        ramp; also aborts a move), then hold. blend_in() resumes the show."""
+        self._request(_core.REQUEST_STOP)
 
     def snapshot(self) -> Snapshot | None:
         """The latest tick, consistent across all axes; None before the first tick."""

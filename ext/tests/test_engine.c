@@ -68,7 +68,7 @@ static void test_limits_random(int cases)
         }
         for (int k = 0; k < TICKS; k++)
             loud[k] = uniform(0, 1);
-        mar_engine_options opt = { 0.02, c % 3, c % 2, TICKS, 16 };
+        mar_engine_options opt = { 0.02, c % 3, c % 2, TICKS, 16, c % 5 == 0 };
         int status;
         mar_engine *e = mar_engine_create(&opt, axes, AXES, show, TICKS, loud, &status);
         CHECK(e != NULL, "create failed: %d", status);
@@ -77,11 +77,22 @@ static void test_limits_random(int cases)
         mar_engine_set_rate(e, uniform(0, 3));
         size_t rs = mar_engine_record_size(e);
         unsigned char *rec = malloc(rs * TICKS);
+        double pose[AXES];
+        for (int j = 0; j < AXES; j++)   /* some targets outside the limits: clamped */
+            pose[j] = uniform(axes[j].limits.pos_min - 0.2, axes[j].limits.pos_max + 0.2);
         long before = allocations;
-        mar_engine_step(e, TICKS / 2);
+        mar_engine_step(e, TICKS / 4);
         mar_engine_seek(e, uniform(0, TICKS));
         mar_engine_set_rate(e, uniform(0, 3));
-        mar_engine_step(e, TICKS / 2);
+        mar_engine_step(e, TICKS / 4);
+        /* online moves in the middle of it all: go to, stop, blend back in */
+        uint64_t k1 = (uint64_t)uniform(1, TICKS / 8), k2 = (uint64_t)uniform(1, TICKS / 8);
+        mar_engine_request(e, MAR_REQ_GOTO, pose, c % 2);
+        mar_engine_step(e, k1);
+        mar_engine_request(e, c % 3 ? MAR_REQ_STOP : MAR_REQ_GOTO, pose, 0);
+        mar_engine_step(e, k2);
+        mar_engine_request(e, MAR_REQ_BLEND, NULL, 1);
+        mar_engine_step(e, TICKS - 2 * (TICKS / 4) - k1 - k2);
         CHECK(allocations == before, "ticks allocated %ld times", allocations - before);
         size_t n = mar_engine_drain_records(e, rec, TICKS);
         CHECK(n == TICKS, "recorded %zu of %d ticks", n, TICKS);
@@ -115,7 +126,7 @@ static void test_bad_inputs(void)
 {
     mar_axis axis = { .limits = { -1, 1, 1, 5 }, .start = 0, .address = { 1, 0, 100, 0 } };
     double show[4] = { 0, 0.1, 0.2, 0.3 }, loud[4] = { 0, 0, 0, 0 };
-    mar_engine_options opt = { 0.02, MAR_LEAD_DEAD_TIME_LAG, MAR_INTERP_CUBIC, 8, 4 };
+    mar_engine_options opt = { 0.02, MAR_LEAD_DEAD_TIME_LAG, MAR_INTERP_CUBIC, 8, 4, 0 };
     int status;
     mar_engine *e = mar_engine_create(&opt, &axis, 1, show, 4, loud, &status);
     CHECK(e != NULL, "create");
@@ -204,7 +215,7 @@ static void test_rtloop(void)
 {
     mar_axis axis = { .limits = { -1, 1, 1, 5 }, .start = 0, .address = { 1, 0, 100, 0 } };
     double show[100] = { 0 }, loud[100] = { 0 };
-    mar_engine_options opt = { 0.005, MAR_LEAD_DEAD_TIME_LAG, MAR_INTERP_CUBIC, 256, 4 };
+    mar_engine_options opt = { 0.005, MAR_LEAD_DEAD_TIME_LAG, MAR_INTERP_CUBIC, 256, 4, 0 };
     int status;
     mar_engine *e = mar_engine_create(&opt, &axis, 1, show, 100, loud, &status);
     mar_rtloop loop;
