@@ -44,6 +44,4 @@ extensions = [
     extension("marionette._shape", "marionette/_shape.pyx", ["ext/mar_shape.c"]),
 ]
 
-import os.path  # TEMP while the shaping module is written
-extensions = [x for x in extensions if os.path.exists(x.sources[0])]
 setup(ext_modules=cythonize(extensions, compiler_directives={"language_level": "3"}))

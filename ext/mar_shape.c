@@ -1,0 +1,294 @@
+#include "mar_shape.h"
+
+#include <errno.h>
+#include <math.h>
+
+/* Relative slack [1] of the feasibility test: a distance that exceeds the
+ * reach only by rounding (e.g. a target reduced to exactly the reach) fits;
+ * the profile's acceleration and speed are then clamped to the limits. */
+#define FIT_SLACK 1e-12
+
+static int finite_positive(double v)
+{
+    return isfinite(v) && v > 0.0;
+}
+
+static int fits(double distance, double reach)
+{
+    return distance <= reach + FIT_SLACK * reach;
+}
+
+double mar_shape_reach(double T, double vmax, double amax)
+{
+    if (!finite_positive(vmax) || !finite_positive(amax) || isnan(T))
+        return NAN;
+    if (T <= 0.0)
+        return 0.0;
+    if (T >= 2.0 * vmax / amax)
+        return vmax * T - vmax * vmax / amax;   /* trapezoid at vmax, amax [unit] */
+    return 0.25 * amax * T * T;                 /* triangle at amax [unit] */
+}
+
+double mar_shape_min_time(double distance, double vmax, double amax)
+{
+    if (!finite_positive(vmax) || !finite_positive(amax) || isnan(distance))
+        return NAN;
+    double d = fabs(distance);                  /* [unit] */
+    if (d <= vmax * vmax / amax)
+        return 2.0 * sqrt(d / amax);            /* triangle at amax [s] */
+    return d / vmax + vmax / amax;              /* trapezoid at vmax, amax [s] */
+}
+
+int mar_shape_plan(double x0, double x1, double t0, double T,
+                   double vmax, double amax, mar_shape_profile *p)
+{
+    if (p == NULL || !isfinite(x0) || !isfinite(x1) || !isfinite(t0) ||
+        !finite_positive(T) || !finite_positive(vmax) || !finite_positive(amax))
+        return -EINVAL;
+    double d = fabs(x1 - x0);                   /* distance [unit] */
+    if (!isfinite(d))
+        return -EINVAL;
+    if (!fits(d, mar_shape_reach(T, vmax, amax)))
+        return MAR_SHAPE_INFEASIBLE;
+    double accel, peak, ramp;                   /* [unit/s^2], [unit/s], [s] */
+    if (d == 0.0) {
+        accel = 0.0;
+        peak = 0.0;
+        ramp = 0.5 * T;
+    } else if (2.0 * d <= vmax * T) {
+        /* triangle: the least peak acceleration of any rest-to-rest move */
+        ramp = 0.5 * T;
+        accel = 4.0 * d / (T * T);
+        peak = 2.0 * d / T;
+    } else {
+        /* the triangle would be too fast: cruise at vmax; d = vmax*(T - ramp) */
+        ramp = T - d / vmax;
+        peak = vmax;
+        accel = vmax / ramp;
+    }
+    if (accel > amax)       /* only by rounding: fits() allowed FIT_SLACK */
+        accel = amax;
+    if (peak > vmax)
+        peak = vmax;
+    p->t0 = t0;
+    p->duration = T;
+    p->x0 = x0;
+    p->x1 = x1;
+    p->accel = accel;
+    p->peak_speed = peak;
+    p->ramp = ramp;
+    return 0;
+}
+
+/* Position [unit] at tau [s] after departure; velocity and acceleration out. */
+static double eval_local(const mar_shape_profile *p, double tau, double *v, double *a)
+{
+    double s = p->x1 >= p->x0 ? 1.0 : -1.0;    /* direction [1] */
+    double T = p->duration, ramp = p->ramp, acc = p->accel;
+    double x, vel, ac;
+    if (tau <= 0.0) {
+        x = p->x0;
+        vel = 0.0;
+        ac = 0.0;
+    } else if (tau >= T) {
+        x = p->x1;                              /* the end is hit bit for bit */
+        vel = 0.0;
+        ac = 0.0;
+    } else if (tau < ramp) {
+        x = p->x0 + s * 0.5 * acc * tau * tau;
+        vel = s * acc * tau;
+        ac = s * acc;
+    } else if (tau <= T - ramp) {
+        x = p->x0 + s * (0.5 * acc * ramp * ramp + p->peak_speed * (tau - ramp));
+        vel = s * p->peak_speed;
+        ac = 0.0;
+    } else {
+        double r = T - tau;                     /* time to arrival [s] */
+        x = p->x1 - s * 0.5 * acc * r * r;
+        vel = s * acc * r;
+        ac = -s * acc;
+    }
+    /* a monotone move: rounding never takes it past either end */
+    double lo = p->x0 < p->x1 ? p->x0 : p->x1, hi = p->x0 < p->x1 ? p->x1 : p->x0;
+    if (x < lo)
+        x = lo;
+    if (x > hi)
+        x = hi;
+    if (v != NULL)
+        *v = vel;
+    if (a != NULL)
+        *a = ac;
+    return x;
+}
+
+void mar_shape_eval(const mar_shape_profile *p, double t, double *x, double *v, double *a)
+{
+    double pos = eval_local(p, t - p->t0, v, a);
+    if (x != NULL)
+        *x = pos;
+}
+
+static int push(mar_shape_extremum *out, size_t cap, size_t *count,
+                size_t tick, double value, int kind)
+{
+    if (*count >= cap)
+        return -ENOSPC;
+    out[*count].tick = (int64_t)tick;
+    out[*count].rest_end = (int64_t)tick;
+    out[*count].value = value;
+    out[*count].kind = kind;
+    out[*count].reserved = 0;
+    ++*count;
+    return 0;
+}
+
+int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_tolerance,
+                      mar_shape_extremum *out, size_t cap, size_t *count)
+{
+    if (x == NULL || out == NULL || count == NULL || n == 0 || !finite_positive(prominence) ||
+        !isfinite(rest_tolerance) || rest_tolerance < 0.0)
+        return -EINVAL;
+    for (size_t k = 0; k < n; ++k)
+        if (!isfinite(x[k]))
+            return -EINVAL;
+    *count = 0;
+    int r = push(out, cap, count, 0, x[0], 0);  /* the first sample anchors the start */
+    if (r < 0)
+        return r;
+    /* trend 0: no excursion of the prominence yet; +1: rising, cand is the
+     * highest tick since the last point of rest; -1: falling, the lowest */
+    int trend = 0;
+    size_t hi = 0, lo = 0, cand = 0;
+    for (size_t k = 1; k < n; ++k) {
+        double v = x[k];                        /* [unit] */
+        if (trend == 0) {
+            if (v > x[hi])
+                hi = k;
+            if (v < x[lo])
+                lo = k;
+            if (x[hi] - x[lo] >= prominence) {
+                trend = k == hi ? 1 : -1;
+                cand = k;
+            }
+        } else if (trend > 0) {
+            if (v > x[cand]) {
+                cand = k;
+            } else if (x[cand] - v >= prominence) {
+                if ((r = push(out, cap, count, cand, x[cand], 1)) < 0)
+                    return r;
+                trend = -1;
+                cand = k;
+            }
+        } else {
+            if (v < x[cand]) {
+                cand = k;
+            } else if (v - x[cand] >= prominence) {
+                if ((r = push(out, cap, count, cand, x[cand], -1)) < 0)
+                    return r;
+                trend = 1;
+                cand = k;
+            }
+        }
+    }
+    /* the end of the show confirms the pending candidate */
+    if (trend != 0 && cand != n - 1)
+        if ((r = push(out, cap, count, cand, x[cand], trend)) < 0)
+            return r;
+    if (out[*count - 1].tick != (int64_t)(n - 1))
+        if ((r = push(out, cap, count, n - 1, x[n - 1], 0)) < 0)
+            return r;
+    /* rests: the run after each climax within the tolerance, before the next point */
+    for (size_t i = 0; i + 1 < *count; ++i) {
+        double v = out[i].value;
+        size_t h = (size_t)out[i].tick, next = (size_t)out[i + 1].tick;
+        if (fabs(out[i + 1].value - v) > rest_tolerance)
+            while (h + 1 < next && fabs(x[h + 1] - v) <= rest_tolerance)
+                ++h;
+        out[i].rest_end = (int64_t)h;
+    }
+    return 0;
+}
+
+int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,
+                   mar_shape_extremum *ext, size_t ext_cap, size_t *n_ext,
+                   mar_shape_segment *seg, size_t seg_cap, size_t *n_seg,
+                   double *out)
+{
+    if (opt == NULL || x == NULL || ext == NULL || n_ext == NULL || n_seg == NULL ||
+        out == NULL || n == 0 || (seg == NULL && seg_cap > 0))
+        return -EINVAL;
+    double T = opt->period, vmax = opt->max_speed, amax = opt->max_accel;
+    if (!finite_positive(T) || !finite_positive(vmax) || !finite_positive(amax) ||
+        !isfinite(opt->pos_min) || !isfinite(opt->pos_max) || !(opt->pos_min <= opt->pos_max) ||
+        (opt->policy != MAR_SHAPE_REDUCE && opt->policy != MAR_SHAPE_BORROW &&
+         opt->policy != MAR_SHAPE_REJECT))
+        return -EINVAL;
+    *n_seg = 0;
+    int r = mar_shape_extrema(x, n, opt->prominence, opt->rest_tolerance, ext, ext_cap, n_ext);
+    if (r < 0)
+        return r;
+    for (size_t i = 0; i < *n_ext; ++i)
+        if (ext[i].value < opt->pos_min || ext[i].value > opt->pos_max)
+            return -ERANGE;
+    size_t count = *n_ext - 1;
+    if (seg_cap < count)
+        return -ENOSPC;
+
+    int infeasible = 0;
+    double start = ext[0].value;                /* planned position at the rest [unit] */
+    out[0] = start;
+    for (size_t i = 0; i < count; ++i) {
+        const mar_shape_extremum *a = &ext[i], *b = &ext[i + 1];
+        mar_shape_segment *s = &seg[i];
+        int64_t depart = a->rest_end;           /* nominal: hold the taught rest [tick] */
+        double D = b->value - start;            /* [unit] */
+        double reach = mar_shape_reach((double)(b->tick - depart) * T, vmax, amax);
+        double end = b->value;
+        int action = 0;
+        s->shortfall = 0.0;
+        if (!fits(fabs(D), reach)) {
+            ++infeasible;
+            s->shortfall = fabs(D) - reach;
+            if (opt->policy == MAR_SHAPE_BORROW) {
+                /* the latest departure, not before the climax, that fits */
+                double need = mar_shape_min_time(D, vmax, amax);     /* [s] */
+                double ticks = ceil(need / T);
+                int64_t d = ticks < (double)(b->tick - a->tick) ? b->tick - (int64_t)ticks : a->tick;
+                if (d > depart)
+                    d = depart;
+                while (d > a->tick &&
+                       !fits(fabs(D), mar_shape_reach((double)(b->tick - d) * T, vmax, amax)))
+                    --d;
+                if (d < depart)
+                    action |= MAR_SHAPE_ACT_BORROWED;
+                depart = d;
+                reach = mar_shape_reach((double)(b->tick - depart) * T, vmax, amax);
+            }
+            if (!fits(fabs(D), reach)) {
+                end = start + (D > 0.0 ? reach : -reach);
+                action |= MAR_SHAPE_ACT_REDUCED;
+            }
+            if (opt->policy == MAR_SHAPE_REJECT)
+                action |= MAR_SHAPE_ACT_REJECTED;
+        }
+        double duration = (double)(b->tick - depart) * T;           /* [s] */
+        r = mar_shape_plan(start, end, (double)depart * T, duration, vmax, amax, &s->profile);
+        if (r != 0)                             /* cannot happen: end is within reach */
+            return r < 0 ? r : -EDOM;
+        s->from_tick = a->tick;
+        s->depart_tick = depart;
+        s->arrive_tick = b->tick;
+        s->target = b->value;
+        s->reduced_by = fabs(b->value - end);
+        s->action = action;
+        s->reserved = 0;
+        for (int64_t k = a->tick; k <= depart; ++k)       /* the hold */
+            out[k] = start;
+        for (int64_t k = depart + 1; k < b->tick; ++k)    /* the move */
+            out[k] = eval_local(&s->profile, (double)(k - depart) * T, NULL, NULL);
+        out[b->tick] = end;                               /* the climax, at rest */
+        start = end;
+    }
+    *n_seg = count;
+    return infeasible;
+}

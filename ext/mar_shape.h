@@ -1,0 +1,141 @@
+/* Offline pragmatic filter (Hoffmann 1996, section 6): the points of rest of
+ * an axis's taught trajectory (its extrema) are joined by timed parabolic
+ * moves -- accelerate, cruise, decelerate -- so that each extremum is reached
+ * exactly at its taught tick, at rest, without exceeding the servo's top
+ * speed and acceleration.
+ *
+ * Units: positions [unit] (m or rad), times [s], ticks [tick] (index of a
+ * show sample), speeds [unit/s], accelerations [unit/s^2].
+ *
+ * Plain C11; no allocation: every buffer is the caller's. Status codes:
+ * 0 or a positive count on success, a negative errno on error.
+ * The method, the profile choice and the policies are in docs/shaping.md. */
+#ifndef MAR_SHAPE_H
+#define MAR_SHAPE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* mar_shape_plan: the move does not fit its duration (not an error) */
+#define MAR_SHAPE_INFEASIBLE 1
+
+/* What to do with a move that cannot cover its distance in its time. */
+typedef enum {
+    MAR_SHAPE_REDUCE = 0,   /* move the target toward the start until it fits */
+    MAR_SHAPE_BORROW = 1,   /* leave the previous point of rest earlier (within its
+                               rest interval); if still short, reduce */
+    MAR_SHAPE_REJECT = 2    /* report; the caller fails (planned as REDUCE) */
+} mar_shape_policy;
+
+/* mar_shape_segment.action bits */
+#define MAR_SHAPE_ACT_REDUCED  1   /* the target was moved toward the start */
+#define MAR_SHAPE_ACT_BORROWED 2   /* the move left its point of rest early */
+#define MAR_SHAPE_ACT_REJECTED 4   /* infeasible under MAR_SHAPE_REJECT */
+
+/* One rest-to-rest move: x(t0) = x0, x(t0 + duration) = x1, velocity 0 at
+ * both ends. Ramps of constant acceleration +-accel [unit/s^2] of length
+ * ramp [s] at each end, and between them constant speed peak_speed [unit/s]
+ * (none when ramp == duration / 2: a triangle). */
+typedef struct {
+    double t0;          /* departure [s], from the first tick of the show */
+    double duration;    /* T [s], > 0 */
+    double x0;          /* start position [unit] */
+    double x1;          /* end position [unit] */
+    double accel;       /* magnitude of the ramp acceleration [unit/s^2] */
+    double peak_speed;  /* magnitude of the cruise speed [unit/s] */
+    double ramp;        /* length of each ramp [s], <= duration / 2 */
+} mar_shape_profile;
+
+/* A point of rest: an extremum of the taught trajectory, or an end. */
+typedef struct {
+    int64_t tick;       /* the climax: tick of the extremum [tick] */
+    int64_t rest_end;   /* last tick of its rest [tick], >= tick (see below) */
+    double value;       /* taught position there [unit] */
+    int32_t kind;       /* +1 maximum, -1 minimum, 0 first or last sample */
+    int32_t reserved;   /* 0 */
+} mar_shape_extremum;
+
+/* The move from one point of rest to the next. */
+typedef struct {
+    int64_t from_tick;    /* climax tick of the start point [tick] */
+    int64_t depart_tick;  /* tick the move leaves [tick], from_tick..rest_end */
+    int64_t arrive_tick;  /* climax tick of the end point [tick] */
+    double target;        /* taught end position [unit] */
+    double shortfall;     /* |D| - reachable |D| over the nominal window
+                             [unit]; 0 when the move fits */
+    double reduced_by;    /* |taught target - planned end| [unit] */
+    int32_t action;       /* MAR_SHAPE_ACT_* bits; 0 when the move fits */
+    int32_t reserved;     /* 0 */
+    mar_shape_profile profile;
+} mar_shape_segment;
+
+typedef struct {
+    double period;          /* tick period [s], > 0 */
+    double max_speed;       /* servo top speed vmax [unit/s], > 0 */
+    double max_accel;       /* servo top acceleration amax [unit/s^2], > 0 */
+    double pos_min;         /* lower position limit [unit] */
+    double pos_max;         /* upper position limit [unit] */
+    double prominence;      /* smallest counted excursion [unit], > 0 */
+    double rest_tolerance;  /* rest band around an extremum [unit], >= 0 */
+    int policy;             /* mar_shape_policy */
+} mar_shape_options;
+
+/* Largest distance |D| [unit] a rest-to-rest move of duration T [s] can
+ * cover with |v| <= vmax [unit/s] and |a| <= amax [unit/s^2]:
+ *   vmax*T - vmax^2/amax  when T >= 2*vmax/amax (trapezoid at the limits),
+ *   amax*T^2/4            otherwise (triangle at amax).
+ * 0 for T <= 0; NaN for bad limits. */
+double mar_shape_reach(double duration, double max_speed, double max_accel);
+
+/* Shortest duration [s] of a rest-to-rest move over |distance| [unit]
+ * (the inverse of mar_shape_reach). NaN for bad limits. */
+double mar_shape_min_time(double distance, double max_speed, double max_accel);
+
+/* The move from x0 to x1 [unit] leaving at t0 [s] and arriving duration [s]
+ * later, with the least peak acceleration: a triangle, accel = 4|D|/T^2,
+ * when its peak speed 2|D|/T <= vmax; else a trapezoid cruising at vmax,
+ * accel = vmax^2/(vmax*T - |D|). Returns 0 with *p set when it fits
+ * (accel <= amax, peak_speed <= vmax), MAR_SHAPE_INFEASIBLE with *p
+ * untouched when |D| > mar_shape_reach(T), -EINVAL for bad arguments
+ * (non-finite, duration <= 0, limits <= 0). */
+int mar_shape_plan(double x0, double x1, double t0, double duration,
+                   double max_speed, double max_accel, mar_shape_profile *p);
+
+/* Position [unit], velocity [unit/s] and acceleration [unit/s^2] of a move
+ * at time t [s] (x0 before t0, x1 after t0 + duration; the position never
+ * leaves [min(x0, x1), max(x0, x1)]). Any output pointer may be NULL. */
+void mar_shape_eval(const mar_shape_profile *p, double t,
+                    double *x, double *v, double *a);
+
+/* Points of rest of x[0..n) [unit] (the first and last samples are always
+ * points of rest), by hysteresis: a maximum counts once the trajectory has
+ * risen by >= prominence [unit] to it from the lowest point since the
+ * previous point of rest and then fallen by >= prominence after it (minima
+ * mirrored); the last pending candidate counts when the show ends. On a
+ * plateau the first tick of the extremum is the climax. rest_end is the
+ * last tick of the run after the climax where |x - value| <= rest_tolerance
+ * [unit], capped before the next point of rest; when the next point of
+ * rest itself lies within the tolerance, rest_end = tick (no hold).
+ * Writes at most cap entries (cap = n always suffices) and the count to
+ * *count. Returns 0, -EINVAL for bad arguments or a non-finite x, -ENOSPC
+ * when cap is too small. */
+int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_tolerance,
+                      mar_shape_extremum *out, size_t cap, size_t *count);
+
+/* Shape one axis: points of rest (mar_shape_extrema), then per pair of
+ * consecutive points a move leaving at the end of the first point's rest
+ * (the figure holds the taught rest) and arriving at the second point's
+ * climax tick, at rest. An infeasible move is handled by opt->policy and
+ * always reported in its segment. out[0..n) receives the shaped trajectory
+ * at every tick [unit]. Buffers: ext and seg of at least n entries each
+ * (n - 1 segments at most). Returns the number of infeasible segments
+ * (>= 0; under MAR_SHAPE_REJECT the output is planned as under REDUCE and
+ * the caller must fail when the count is not 0), -EINVAL for bad options
+ * or a non-finite x, -ERANGE when a point of rest lies outside
+ * [pos_min, pos_max], -ENOSPC when a buffer is too small. */
+int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,
+                   mar_shape_extremum *ext, size_t ext_cap, size_t *n_ext,
+                   mar_shape_segment *seg, size_t seg_cap, size_t *n_seg,
+                   double *out);
+
+#endif

@@ -1,0 +1,217 @@
+# cython: language_level=3, boundscheck=False, wraparound=False
+"""Binding of the offline pragmatic filter (ext/mar_shape.c).
+
+Validates arguments, then calls C (inside ``with nogil`` where the call may
+take time). Returns C status codes and numpy arrays; marionette.shape raises.
+Units: positions [unit], times [s], ticks [tick], speeds [unit/s],
+accelerations [unit/s^2].
+"""
+import numpy as np
+cimport numpy as cnp
+from libc.stdint cimport int32_t, int64_t
+from libc.stdlib cimport calloc, free
+
+cnp.import_array()
+
+
+cdef extern from "mar_shape.h" nogil:
+    enum:
+        MAR_SHAPE_INFEASIBLE
+        MAR_SHAPE_REDUCE
+        MAR_SHAPE_BORROW
+        MAR_SHAPE_REJECT
+        MAR_SHAPE_ACT_REDUCED
+        MAR_SHAPE_ACT_BORROWED
+        MAR_SHAPE_ACT_REJECTED
+    ctypedef struct mar_shape_profile:
+        double t0
+        double duration
+        double x0
+        double x1
+        double accel
+        double peak_speed
+        double ramp
+    ctypedef struct mar_shape_extremum:
+        int64_t tick
+        int64_t rest_end
+        double value
+        int32_t kind
+        int32_t reserved
+    ctypedef struct mar_shape_segment:
+        int64_t from_tick
+        int64_t depart_tick
+        int64_t arrive_tick
+        double target
+        double shortfall
+        double reduced_by
+        int32_t action
+        int32_t reserved
+        mar_shape_profile profile
+    ctypedef struct mar_shape_options:
+        double period
+        double max_speed
+        double max_accel
+        double pos_min
+        double pos_max
+        double prominence
+        double rest_tolerance
+        int policy
+    double mar_shape_reach(double duration, double max_speed, double max_accel)
+    double mar_shape_min_time(double distance, double max_speed, double max_accel)
+    int mar_shape_plan(double x0, double x1, double t0, double duration,
+                       double max_speed, double max_accel, mar_shape_profile *p)
+    void mar_shape_eval(const mar_shape_profile *p, double t, double *x, double *v, double *a)
+    int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_tolerance,
+                          mar_shape_extremum *out, size_t cap, size_t *count)
+    int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,
+                       mar_shape_extremum *ext, size_t ext_cap, size_t *n_ext,
+                       mar_shape_segment *seg, size_t seg_cap, size_t *n_seg, double *out)
+
+
+INFEASIBLE = MAR_SHAPE_INFEASIBLE
+POLICIES = {"reduce": MAR_SHAPE_REDUCE, "borrow": MAR_SHAPE_BORROW, "reject": MAR_SHAPE_REJECT}
+ACT_REDUCED = MAR_SHAPE_ACT_REDUCED
+ACT_BORROWED = MAR_SHAPE_ACT_BORROWED
+ACT_REJECTED = MAR_SHAPE_ACT_REJECTED
+
+# A move, as mar_shape_profile.
+PROFILE_FIELDS = ("t0", "duration", "x0", "x1", "accel", "peak_speed", "ramp")
+EXTREMUM_DTYPE = np.dtype([
+    ("tick", "i8"), ("rest_end", "i8"),     # climax and last tick of its rest [tick]
+    ("value", "f8"),                        # taught position [unit]
+    ("kind", "i4"),                         # +1 max, -1 min, 0 first/last sample
+])
+SEGMENT_DTYPE = np.dtype([
+    ("from_tick", "i8"), ("depart_tick", "i8"), ("arrive_tick", "i8"),   # [tick]
+    ("target", "f8"),                       # taught end position [unit]
+    ("shortfall", "f8"),                    # |D| - reachable |D| (nominal window) [unit]
+    ("reduced_by", "f8"),                   # how far the end was moved [unit]
+    ("action", "i4"),                       # ACT_* bits
+    ("t0", "f8"), ("duration", "f8"),       # [s]
+    ("x0", "f8"), ("x1", "f8"),             # [unit]
+    ("accel", "f8"), ("peak_speed", "f8"),  # [unit/s^2], [unit/s]
+    ("ramp", "f8"),                         # [s]
+])
+
+
+def reach(double duration, double max_speed, double max_accel):
+    """Largest distance [unit] a rest-to-rest move of duration [s] can cover."""
+    return mar_shape_reach(duration, max_speed, max_accel)
+
+
+def min_time(double distance, double max_speed, double max_accel):
+    """Shortest duration [s] of a rest-to-rest move over |distance| [unit]."""
+    return mar_shape_min_time(distance, max_speed, max_accel)
+
+
+def plan(double x0, double x1, double t0, double duration, double max_speed, double max_accel):
+    """(status, profile dict or None): 0 fits, INFEASIBLE, or a negative errno."""
+    cdef mar_shape_profile p
+    cdef int r = mar_shape_plan(x0, x1, t0, duration, max_speed, max_accel, &p)
+    if r != 0:
+        return r, None
+    return r, {"t0": p.t0, "duration": p.duration, "x0": p.x0, "x1": p.x1,
+               "accel": p.accel, "peak_speed": p.peak_speed, "ramp": p.ramp}
+
+
+cdef int _profile_from(prof, mar_shape_profile *p) except -1:
+    p.t0 = prof["t0"]
+    p.duration = prof["duration"]
+    p.x0 = prof["x0"]
+    p.x1 = prof["x1"]
+    p.accel = prof["accel"]
+    p.peak_speed = prof["peak_speed"]
+    p.ramp = prof["ramp"]
+    return 0
+
+
+def evaluate(prof, t):
+    """(x, v, a) of a move (dict or segment record) at times t [s]: [unit],
+    [unit/s], [unit/s^2]."""
+    cdef mar_shape_profile p
+    _profile_from(prof, &p)
+    cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] tt = np.ascontiguousarray(
+        np.atleast_1d(t), dtype=np.float64).ravel()
+    cdef Py_ssize_t n = tt.shape[0], i
+    cdef cnp.ndarray[cnp.float64_t, ndim=1] x = np.empty(n)
+    cdef cnp.ndarray[cnp.float64_t, ndim=1] v = np.empty(n)
+    cdef cnp.ndarray[cnp.float64_t, ndim=1] a = np.empty(n)
+    cdef double xi, vi, ai
+    for i in range(n):
+        mar_shape_eval(&p, tt[i], &xi, &vi, &ai)
+        x[i] = xi
+        v[i] = vi
+        a[i] = ai
+    return x, v, a
+
+
+def extrema(x, double prominence, double rest_tolerance):
+    """(status, EXTREMUM_DTYPE array) of the points of rest of x [unit]."""
+    cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] xx = np.ascontiguousarray(x, dtype=np.float64)
+    cdef size_t n = xx.shape[0], count = 0, i
+    if n == 0:
+        raise ValueError("extrema: empty trajectory")
+    cdef mar_shape_extremum *buf = <mar_shape_extremum *>calloc(n, sizeof(mar_shape_extremum))
+    if buf == NULL:
+        raise MemoryError()
+    cdef int r
+    try:
+        with nogil:
+            r = mar_shape_extrema(&xx[0], n, prominence, rest_tolerance, buf, n, &count)
+        out = np.zeros(count if r == 0 else 0, dtype=EXTREMUM_DTYPE)
+        if r == 0:
+            for i in range(count):
+                out[i] = (buf[i].tick, buf[i].rest_end, buf[i].value, buf[i].kind)
+        return r, out
+    finally:
+        free(buf)
+
+
+def shape_axis(x, double period, double max_speed, double max_accel, double pos_min,
+               double pos_max, double prominence, double rest_tolerance, str policy):
+    """Shape one axis's trajectory x [unit] (one sample per tick of period [s]).
+
+    Returns (status, shaped [unit], EXTREMUM_DTYPE array, SEGMENT_DTYPE array);
+    status is the number of infeasible segments (>= 0) or a negative errno.
+    """
+    if policy not in POLICIES:
+        raise ValueError(f"policy must be one of {sorted(POLICIES)}, not {policy!r}")
+    cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] xx = np.ascontiguousarray(x, dtype=np.float64)
+    cdef size_t n = xx.shape[0], n_ext = 0, n_seg = 0, i
+    if n == 0:
+        raise ValueError("shape_axis: empty trajectory")
+    cdef mar_shape_options opt
+    opt.period = period
+    opt.max_speed = max_speed
+    opt.max_accel = max_accel
+    opt.pos_min = pos_min
+    opt.pos_max = pos_max
+    opt.prominence = prominence
+    opt.rest_tolerance = rest_tolerance
+    opt.policy = POLICIES[policy]
+    cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] out = np.empty(n)
+    cdef mar_shape_extremum *ext = <mar_shape_extremum *>calloc(n, sizeof(mar_shape_extremum))
+    cdef mar_shape_segment *seg = <mar_shape_segment *>calloc(n, sizeof(mar_shape_segment))
+    cdef int r
+    cdef mar_shape_segment *s
+    try:
+        if ext == NULL or seg == NULL:
+            raise MemoryError()
+        with nogil:
+            r = mar_shape_axis(&opt, &xx[0], n, ext, n, &n_ext, seg, n, &n_seg, &out[0])
+        if r < 0:
+            return r, None, None, None
+        extr = np.zeros(n_ext, dtype=EXTREMUM_DTYPE)
+        for i in range(n_ext):
+            extr[i] = (ext[i].tick, ext[i].rest_end, ext[i].value, ext[i].kind)
+        segs = np.zeros(n_seg, dtype=SEGMENT_DTYPE)
+        for i in range(n_seg):
+            s = &seg[i]
+            segs[i] = (s.from_tick, s.depart_tick, s.arrive_tick, s.target, s.shortfall,
+                       s.reduced_by, s.action, s.profile.t0, s.profile.duration,
+                       s.profile.x0, s.profile.x1, s.profile.accel, s.profile.peak_speed,
+                       s.profile.ramp)
+        return r, out, extr, segs
+    finally:
+        free(ext)
+        free(seg)

@@ -1,0 +1,224 @@
+"""``climax``: do the shaped points of rest land on time on the servos? [ticks]
+
+1. A random taught dance for the figure (fixed seed): per axis, climaxes at
+   random intervals (0.6 .. 2.0 s) with random values in the middle 80 % of
+   the position range, joined by raised-cosine moves whose peak speed may
+   exceed the servo's top speed (the dancer is faster than the machinery),
+   plus small wiggles (0.4 % of the range, below the prominence) that must
+   not count as points of rest.
+2. Shaped by ``marionette.shape.shape_show`` (policy reduce, default
+   prominence, ``rest_tolerance=0``: no holds, so every climax is a sharp
+   extremum of the shaped trajectory whose time can be measured), planned
+   with headroom for the lag feed-forward: ``accel_fraction=0.25``,
+   ``lag_headroom=True`` (speed <= top speed - tau * acceleration). Planned
+   to the full limits, the compensated command x + tau*x' leaves the limits
+   and the engine's limiter, not the compensation, sets the timing: several
+   ticks to tens of ticks late on the slow axes (docs/shaping.md).
+3. Played through ``Engine(config, shaped, lead=..., record=True).step(n)``
+   with ``lead="dead_time_lag"`` (compensated) and ``lead="none"``.
+4. Each axis's commands go into a simulated servo: zero-order hold of each
+   tick's command, dead time ``axis.dead_time - period/2`` (the figure's dead
+   time includes the half tick the hold adds, as identification from
+   setpoints measures it; tests/test_engine.py ``servo_response``), then a
+   first-order lag ``axis.time_constant``, on a fine internal step of
+   period/SUBSTEPS (exact discretisation of the lag).
+5. For every climax (an interior extremum of the shaped trajectory) the
+   servo's extremum of the same kind nearest the climax tick, between the
+   neighbouring climaxes, on the fine grid, refined by a parabola through
+   it and its two neighbours: the timing error is that time minus the
+   climax tick [ticks]; its absolute value's max and median are reported.
+   A climax whose excursion was reduced so far that it is no longer an
+   extremum of the shaped trajectory is not timed (climaxes counts the rest).
+
+Target: max |error| <= 1 tick with compensation. JSON keys:
+climax_error_ticks_max_compensated, climax_error_ticks_median_compensated,
+climax_error_ticks_max_uncompensated, climax_error_ticks_median_uncompensated,
+plus climaxes, infeasible, seconds, seed, target_ticks, target_met.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from marionette.config import FigureConfig, load_config
+from marionette.engine import Engine
+from marionette.shape import shape_show
+from marionette.show import Show
+
+SEED = 1996
+SECONDS = 30.0        # length of the random dance [s]
+SUBSTEPS = 20         # fine simulation steps per tick [1]
+ACCEL_FRACTION = 0.25  # moves planned to this fraction of each top acceleration [1]
+TARGET_TICKS = 1.0    # max |climax timing error| with compensation [ticks]
+
+
+def random_dance(config: FigureConfig, seconds: float = SECONDS, seed: int = SEED) -> Show:
+    """A taught dance with sharp climaxes, sometimes faster than the servos."""
+    rng = np.random.default_rng(seed)
+    T = config.tick_period
+    n = int(round(seconds / T))
+    t = np.arange(n) * T                                              # [s]
+    positions = np.empty((len(config.axes), n))
+    for j, a in enumerate(config.axes):
+        span = a.max - a.min                                          # [unit]
+        mid = 0.5 * (a.min + a.max)
+        times = [0.0, 1.0]                                            # 1 s at rest first
+        while times[-1] < seconds:
+            times.append(times[-1] + rng.uniform(0.6, 2.0))
+        values = mid + rng.uniform(-0.4, 0.4, len(times)) * span
+        values[:2] = mid
+        x = np.interp(t, times, values)                               # knots, then ...
+        k = np.searchsorted(times, t, side="right") - 1
+        t0, t1 = np.asarray(times)[k], np.asarray(times)[k + 1]
+        s = (t - t0) / (t1 - t0)                                      # [1]
+        x = values[k] + (values[k + 1] - values[k]) * 0.5 * (1 - np.cos(np.pi * s))   # raised cosine
+        wiggle = 0.004 * span * np.sin(2 * np.pi * rng.uniform(1.5, 3.0) * t + rng.uniform(0, 6.3))
+        positions[j] = np.clip(x + wiggle * np.clip(t - 1.0, 0.0, 1.0), a.min, a.max)
+    return Show(axis_names=config.axis_names, units=[a.unit for a in config.axes],
+                positions=positions, loudness=np.zeros(n), tick_period=T,
+                source=f"marionette.bench.climax seed {seed}")
+
+
+def servo_fine(commands: np.ndarray, period: float, dead_time: float, tau: float,
+               substeps: int = SUBSTEPS) -> np.ndarray:
+    """Servo position [unit] every period/substeps [s], from the command at
+    each tick [unit]: zero-order hold, dead time [s], first-order lag tau [s].
+    Sample i is the position at time i*period/substeps."""
+    dt = period / substeps
+    delay = int(round(dead_time / dt))
+    u = np.repeat(np.asarray(commands, dtype=float), substeps)
+    u = np.concatenate([np.full(delay, u[0]), u])[: len(u)]
+    if tau <= 0:
+        return u
+    # y[i+1] = y[i] + alpha*(u[i] - y[i]): exact for u held over each fine step
+    beta = np.exp(-dt / tau)
+    y = np.empty_like(u)
+    y_prev = u[0]
+    # blocks of a closed form keep this a few numpy calls per block
+    block = 256
+    powers = beta ** np.arange(1, block + 1)
+    for s in range(0, len(u), block):
+        chunk = u[s:s + block]
+        m = len(chunk)
+        p = powers[:m]
+        # y[s+i] for i = 0..m-1 is y at the start of fine step s+i
+        # y_{s+i+1} = beta^(i+1) y_s + (1-beta) * sum_{l<=i} beta^(i-l) u_{s+l}
+        acc = np.empty(m)
+        conv = np.convolve(chunk, beta ** np.arange(m))[:m]
+        acc[:] = p * y_prev + (1 - beta) * conv
+        y[s] = y_prev
+        y[s + 1:s + m] = acc[:-1]
+        y_prev = acc[-1]
+    return y
+
+
+def shaped_climaxes(points: np.ndarray, moves: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ticks, kinds) of the points of rest that are still extrema of the
+    shaped trajectory (a reduced excursion can turn a climax into a step)."""
+    if not len(moves):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    planned = np.concatenate([moves["x0"][:1], moves["x1"]])          # [unit]
+    rise = np.sign(np.diff(planned))
+    kind = np.zeros(len(planned), dtype=np.int64)
+    kind[1:-1] = np.where(rise[:-1] * rise[1:] < 0, rise[:-1], 0).astype(np.int64)
+    keep = kind != 0
+    return points["tick"][keep], kind[keep]
+
+
+def _climax_times(y: np.ndarray, kind: np.ndarray, ticks: np.ndarray, substeps: int) -> np.ndarray:
+    """Time [ticks] of the servo's extremum of each climax's kind nearest its
+    tick, between the neighbouring climaxes; NaN when there is none."""
+    out = np.full(len(ticks), np.nan)
+    n = len(y)
+    for i, (k, sign) in enumerate(zip(ticks, kind)):
+        lo = (ticks[i - 1] if i > 0 else 0) * substeps
+        hi = min(n - 1, (ticks[i + 1] if i + 1 < len(ticks) else n // substeps) * substeps)
+        seg = sign * y[lo:hi + 1]
+        # local maxima of sign*y; a plateau counts at its first sample
+        inner = np.flatnonzero((seg[1:-1] > seg[:-2]) & (seg[1:-1] >= seg[2:])) + 1
+        if not inner.size:
+            continue
+        c = inner[np.argmin(np.abs(inner + lo - k * substeps))]
+        y0, y1, y2 = seg[c - 1], seg[c], seg[c + 1]
+        den = y0 - 2 * y1 + y2                   # parabola through the three samples
+        frac = 0.5 * (y0 - y2) / den if den != 0 else 0.0
+        out[i] = (lo + c + frac) / substeps
+    return out
+
+
+def climax_timing(config: FigureConfig | None = None, seed: int = SEED,
+                  seconds: float = SECONDS, substeps: int = SUBSTEPS) -> dict:
+    """Climax timing errors [ticks] of the servos, with and without compensation."""
+    config = config if config is not None else load_config()
+    T = config.tick_period
+    taught = random_dance(config, seconds, seed)
+    shaped, report = shape_show(taught, config, policy="reduce", rest_tolerance=0.0,
+                                accel_fraction=ACCEL_FRACTION, lag_headroom=True)
+    n = shaped.n_ticks
+    result: dict = {}
+    for label, lead in (("compensated", "dead_time_lag"), ("uncompensated", "none")):
+        with Engine(config, shaped, lead=lead, record=True) as engine:
+            engine.step(n)
+            commands = engine.records()["command"]
+        errors = []
+        for j, a in enumerate(config.axes):
+            ticks, kinds = shaped_climaxes(report.axes[j].points, report.axes[j].moves)
+            if not len(ticks):
+                continue
+            y = servo_fine(commands[:, j], T, max(0.0, a.dead_time - T / 2), a.time_constant,
+                           substeps)
+            errors.append(_climax_times(y, kinds, ticks, substeps) - ticks)
+        err = np.abs(np.concatenate(errors))
+        missing = int(np.count_nonzero(np.isnan(err)))
+        err = err[~np.isnan(err)]
+        result[f"climax_error_ticks_max_{label}"] = float(err.max())
+        result[f"climax_error_ticks_median_{label}"] = float(np.median(err))
+        result[f"climaxes_unmatched_{label}"] = missing
+    result.update(
+        climaxes=int(sum(len(shaped_climaxes(a.points, a.moves)[0]) for a in report.axes)),
+        moves=report.segments, infeasible=len(report.infeasible), seconds=seconds, seed=seed,
+        figure=config.name, target_ticks=TARGET_TICKS,
+        target_met=bool(result["climax_error_ticks_max_compensated"] <= TARGET_TICKS))
+    return result
+
+
+def format_table(r: dict) -> str:
+    lines = [f"climax timing on {r['figure']}: {r['climaxes']} climaxes in a {r['seconds']:g} s "
+             f"random dance (seed {r['seed']}), {r['infeasible']} of {r['moves']} moves infeasible "
+             f"(reduced)",
+             f"  {'lead':<16}{'max |error| [ticks]':>22}{'median [ticks]':>17}"]
+    for label, lead in (("compensated", "dead_time_lag"), ("uncompensated", "none")):
+        lines.append(f"  {lead:<16}{r[f'climax_error_ticks_max_{label}']:>22.3f}"
+                     f"{r[f'climax_error_ticks_median_{label}']:>17.3f}")
+    lines.append(f"  target: max <= {r['target_ticks']:g} tick compensated: "
+                 f"{'met' if r['target_met'] else 'MISSED'}")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="marionette bench climax",
+        description="Timing error [ticks] of the shaped climaxes on simulated servos, "
+                    "with and without dead-time/lag compensation.")
+    parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
+    parser.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
+    parser.add_argument("--seed", type=int, default=SEED, help="seed of the random dance")
+    parser.add_argument("--seconds", type=float, default=SECONDS, help="length of the dance [s]")
+    parser.add_argument("--strict", action="store_true", help="exit 1 if the target is missed")
+    args = parser.parse_args(argv)
+    if not args.seconds > 0:
+        parser.error("--seconds must be > 0")
+    r = climax_timing(load_config(args.config), args.seed, args.seconds)
+    if args.json:
+        json.dump(r, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+    else:
+        print(format_table(r))
+    return 1 if args.strict and not r["target_met"] else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
