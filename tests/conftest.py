@@ -1,4 +1,8 @@
-"""Shared fixtures: small figures and shows made on the spot."""
+"""Shared fixtures: small figures and shows made on the spot, and the CLI."""
+import subprocess
+import sys
+import tempfile
+
 import numpy as np
 import pytest
 
@@ -46,3 +50,10 @@ def smooth_dance(config, ticks, rng, fraction=0.4):
 @pytest.fixture
 def rng():
     return np.random.default_rng(20261122)
+
+
+def run_cli(*args, timeout=120):
+    """The marionette command in its own process, started outside the source
+    tree so that it imports the installed package, as a user's would."""
+    return subprocess.run([sys.executable, "-m", "marionette.cli", *map(str, args)],
+                          capture_output=True, text=True, timeout=timeout, cwd=tempfile.gettempdir())

@@ -1,15 +1,9 @@
 """The marionette command, run as a user runs it: a separate process."""
-import subprocess
-import sys
-
 import numpy as np
 
 from marionette.recorder import read_flight_record
 
-
-def run(*args):
-    return subprocess.run([sys.executable, "-m", "marionette.cli", *args],
-                          capture_output=True, text=True, timeout=120)
+from conftest import run_cli as run
 
 
 def test_play_the_demo_in_step_mode(tmp_path):

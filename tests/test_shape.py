@@ -8,8 +8,6 @@ motion with |a| <= amax has |x[k+1] - 2x[k] + x[k-1]| <= amax*T^2 per step
 |x[k+1] - x[k]| <= vmax*T, so those hold too, up to rounding.
 """
 import errno
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -18,7 +16,7 @@ from marionette import _shape, load_config, load_show
 from marionette.demo import DEMO_SHOW
 from marionette.errors import ShowError
 from marionette.shape import shape_show
-from conftest import make_figure, make_show
+from conftest import make_figure, make_show, run_cli
 
 REL = 1e-9
 SEED = 20261122
@@ -358,15 +356,12 @@ def test_cli_shape(tmp_path):
     src = tmp_path / "taught.csv"
     show.save(src)
     out = tmp_path / "shaped.npz"
-    run = subprocess.run([sys.executable, "-m", "marionette.cli", "shape", str(src), "-o", str(out),
-                          "--config", str(figure), "--policy", "borrow", "--prominence", "0.05"],
-                         capture_output=True, text=True)
+    run = run_cli("shape", src, "-o", out, "--config", figure, "--policy", "borrow",
+                  "--prominence", "0.05")
     assert run.returncode == 0, run.stderr
     assert "policy borrow" in run.stdout and "left" in run.stdout and out.exists()
     shaped = load_show(out, config)
     assert shaped.positions[1, 114] == 0.0
-    run = subprocess.run([sys.executable, "-m", "marionette.cli", "shape", str(src), "-o",
-                          str(tmp_path / "no.csv"), "--config", str(figure), "--policy", "reject"],
-                         capture_output=True, text=True)
+    run = run_cli("shape", src, "-o", tmp_path / "no.csv", "--config", figure, "--policy", "reject")
     assert run.returncode == 2
     assert "axis 'a1' at 2.280 s: short by" in run.stderr and not (tmp_path / "no.csv").exists()
