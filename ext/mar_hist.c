@@ -57,6 +57,11 @@ uint64_t mar_hist_count(const mar_hist *h)
     return atomic_load_explicit(&h->count, memory_order_relaxed);
 }
 
+uint64_t mar_hist_bin(const mar_hist *h, int i)
+{
+    return atomic_load_explicit(&h->bins[i], memory_order_relaxed);
+}
+
 int64_t mar_hist_max(const mar_hist *h)
 {
     return atomic_load_explicit(&h->max_ns, memory_order_relaxed);

@@ -23,6 +23,7 @@ void mar_hist_add(mar_hist *h, int64_t value_ns);
  * exact maximum); -1 when empty. */
 int64_t mar_hist_quantile(const mar_hist *h, double q);
 uint64_t mar_hist_count(const mar_hist *h);
+uint64_t mar_hist_bin(const mar_hist *h, int index);         /* samples in one bucket */
 int64_t mar_hist_max(const mar_hist *h);
 
 /* Bucket index of a value, and a bucket's lower bound and width [ns]. */

@@ -16,8 +16,13 @@ cdef extern from "mar_setpoint0.h" nogil:
 
 
 cdef extern from "mar_hist.h" nogil:
+    enum:
+        MAR_HIST_BINS
     ctypedef struct mar_hist:
         pass
+    uint64_t mar_hist_bin(const mar_hist *h, int index)
+    int64_t mar_hist_lower(int index)
+    int64_t mar_hist_width(int index)
     int64_t mar_hist_quantile(const mar_hist *h, double q)
     uint64_t mar_hist_count(const mar_hist *h)
     int64_t mar_hist_max(const mar_hist *h)

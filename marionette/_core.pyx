@@ -213,6 +213,17 @@ cdef class CoreEngine:
                                   else mar_engine_compute_hist(self.engine))
         return [mar_hist_quantile(h, q) for q in qs], mar_hist_count(h), mar_hist_max(h)
 
+    def histogram(self, str which):
+        """(bucket lower bounds [ns], widths [ns], counts, max [ns]) of the 'wake' or
+        'compute' histogram, for merging runs."""
+        cdef const mar_hist *h = (mar_engine_wake_hist(self.engine) if which == "wake"
+                                  else mar_engine_compute_hist(self.engine))
+        cdef int i
+        lower = np.array([mar_hist_lower(i) for i in range(MAR_HIST_BINS)], dtype=np.int64)
+        width = np.array([mar_hist_width(i) for i in range(MAR_HIST_BINS)], dtype=np.int64)
+        counts = np.array([mar_hist_bin(h, i) for i in range(MAR_HIST_BINS)], dtype=np.uint64)
+        return lower, width, counts, mar_hist_max(h)
+
 
 def plan_move(double x0, double v0, double target, double max_speed, double max_accel,
               times=None, duration=None):

@@ -318,6 +318,13 @@ class Engine:
         self._drain()
         return self.recorder.records()
 
+    def histogram(self, which: str = "wake") -> tuple:
+        """The 'wake' (latency) or 'compute' histogram: bucket lower bounds
+        [ns], widths [ns], counts, and the exact maximum [ns]."""
+        if which not in ("wake", "compute"):
+            raise ValueError(f"histogram is 'wake' or 'compute', not {which!r}")
+        return self._core.histogram(which)
+
     def stats(self) -> dict:
         """Counters, and wake-latency and compute-time percentiles [us]."""
         out = dict(self._core.counters())

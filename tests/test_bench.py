@@ -18,8 +18,9 @@ import pytest
 
 from marionette import Engine
 from marionette.bench import jitter, reference, tick
-from marionette.config import config_from_dict
-from marionette.show import Show
+from marionette.config import config_from_dict, load_config
+from marionette.demo import DEMO_SHOW
+from marionette.show import Show, load_show
 
 SEED = 20261122
 N_CASES = 64
@@ -182,7 +183,7 @@ def test_tick_bench_table(capsys):
 
 
 def test_jitter_bench_json(capsys):
-    assert jitter.main(["--json", "--seconds", "1"]) == 0
+    assert jitter.main(["--json", "--seconds", "1", "--rounds", "2"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert {"engine", "cyclictest", "engine_gil_load", "machine", "seconds"} <= set(out)
     assert out["seconds"] == 1
@@ -198,3 +199,21 @@ def test_jitter_bench_json(capsys):
         assert STAT_KEYS <= set(out["cyclictest"])
         assert out["cyclictest"]["count"] == 50
         assert 0 <= out["cyclictest"]["p50_us"] <= out["cyclictest"]["max_us"]
+
+
+def test_histogram_quantiles_in_python_follow_the_c_rule(rng):
+    """The jitter bench merges rounds in Python; on one histogram its
+    quantiles must equal the C engine's own."""
+    config = load_config()
+    with Engine(config, load_show(DEMO_SHOW, config)) as engine:
+        engine.step(3000)
+        stats = engine.stats()["compute"]
+        lower, width, counts, peak = engine.histogram("compute")
+    assert int(counts.sum()) == stats["count"] == 3000
+    for name, q in (("p50", 0.5), ("p99", 0.99), ("p999", 0.999)):
+        assert jitter._hist_quantile(lower, width, counts, peak, q) / 1e3 == stats[f"{name}_us"]
+    merged = jitter.merge_engine_runs([
+        {"_histogram": (lower, width, counts, peak), "overruns": 1, "compute_p99_us": 1.0, "warnings": []},
+        {"_histogram": (lower, width, counts, peak), "overruns": 2, "compute_p99_us": 2.0, "warnings": []}])
+    assert merged["count"] == 6000 and merged["overruns"] == 3
+    assert merged["p99_us"] == stats["p99_us"] and merged["max_us"] == peak / 1e3

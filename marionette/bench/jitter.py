@@ -1,7 +1,11 @@
 """``marionette bench jitter``: wake latency of the real-time loop [us].
 
-Three runs back to back, each ``--seconds`` long at the figure's tick period
-(20 ms for the bundled figure) and the same SCHED_FIFO priority:
+Three kinds of run, each ``--seconds`` long in all at the figure's tick
+period (20 ms for the bundled figure) and the same SCHED_FIFO priority.
+They are interleaved in ``--rounds`` rounds (engine, cyclictest, engine
+under GIL load, then again), and each kind's samples are merged over its
+rounds, so that a burst of noise from the host lands on all three alike
+rather than on whichever happened to run at that moment:
 
 1. ``engine``: the bundled figure playing the demo show in the real-time
    loop (``engine.start(priority=P, lock_memory=True, max_ticks=N)``); the
@@ -51,7 +55,8 @@ from marionette.engine import Engine
 from marionette.show import load_show
 
 PRIORITY = 80             # SCHED_FIFO priority of the tick thread and of cyclictest [1..99]
-SECONDS = 20.0            # length of each run [s]
+SECONDS = 20.0            # length of each kind of run, all rounds together [s]
+ROUNDS = 4                # interleaved rounds
 CHURN_THREADS = 2         # Python threads loading the GIL in the third run
 
 _SAMPLE = re.compile(r"^\s*(\d+):\s*(\d+):\s*(\d+)\s*$")          # thread:count:latency (-v)
@@ -96,6 +101,7 @@ def _engine_run(ticks: int, priority: int, lock_memory: bool, churn: int = 0,
         if not engine.wait(timeout=ticks * period + 30.0):
             raise RuntimeError("the real-time loop did not finish its ticks in time")
         stats = engine.stats()
+        histogram = engine.histogram("wake")
     finally:
         stop.set()
         for t in threads:
@@ -105,6 +111,7 @@ def _engine_run(ticks: int, priority: int, lock_memory: bool, churn: int = 0,
     return {
         "p50_us": wake["p50_us"], "p99_us": wake["p99_us"], "p999_us": wake["p999_us"],
         "max_us": wake["max_us"], "overruns": int(stats["overruns"]), "count": int(wake["count"]),
+        "_histogram": histogram,
         "compute_p99_us": stats["compute"]["p99_us"],      # tick body [us], for context
         "fifo": bool(report.get("fifo")), "memory_locked": bool(report.get("memory_locked")),
         "pinned": bool(report.get("pinned")),
@@ -145,7 +152,44 @@ def _cyclictest_run(ticks: int, period: float, priority: int, lock_memory: bool,
         "overruns": None,                      # cyclictest does not count missed periods
         "count": len(samples),
         "command": " ".join(cmd),
+        "_ns": ns,
     }
+
+
+def _hist_quantile(lower, width, counts, peak, q: float) -> float:
+    """Latency [ns] at quantile q of a merged engine histogram, by the C rule
+    (mar_hist_quantile): the bucket of rank ceil(q*n), its midpoint, capped at the max."""
+    total = int(counts.sum())
+    rank = min(max(math.ceil(q * total), 1), total)
+    i = int(np.searchsorted(np.cumsum(counts), rank))
+    return float(min(lower[i] + width[i] // 2, peak))
+
+
+def merge_engine_runs(runs: list[dict]) -> dict:
+    """One engine result from several rounds: histograms summed."""
+    lower, width = runs[0]["_histogram"][:2]
+    counts = sum(r["_histogram"][2].astype(np.int64) for r in runs)
+    peak = max(r["_histogram"][3] for r in runs)
+    out = dict(runs[-1])
+    out.update({f"{name}_us": _hist_quantile(lower, width, counts, peak, q) / 1e3
+                for name, q in (("p50", 0.5), ("p99", 0.99), ("p999", 0.999))})
+    out.update(max_us=peak / 1e3, count=int(counts.sum()),
+               overruns=sum(r["overruns"] for r in runs),
+               compute_p99_us=max(r["compute_p99_us"] for r in runs),
+               warnings=sorted({w for r in runs for w in r["warnings"]}))
+    del out["_histogram"]
+    return out
+
+
+def merge_cyclictest_runs(runs: list[dict]) -> dict:
+    """One cyclictest result from several rounds: samples pooled."""
+    ns = np.sort(np.concatenate([r["_ns"] for r in runs]))
+    out = dict(runs[-1])
+    out.update(p50_us=_nearest_rank(ns, 0.5) / 1e3, p99_us=_nearest_rank(ns, 0.99) / 1e3,
+               p999_us=_nearest_rank(ns, 0.999) / 1e3,
+               max_us=max(r["max_us"] for r in runs), count=len(ns))
+    del out["_ns"]
+    return out
 
 
 def check_targets(result: dict) -> list[tuple[str, str, bool | None]]:
@@ -170,9 +214,10 @@ def check_targets(result: dict) -> list[tuple[str, str, bool | None]]:
 
 def run(seconds: float = SECONDS, priority: int = PRIORITY, lock_memory: bool = True,
         cyclictest: str | None = "cyclictest", churn_threads: int = CHURN_THREADS,
-        cpu: int | None = None) -> dict:
-    """The three runs (see the module docstring), seconds [s] each; cpu pins
-    the tick thread and cyclictest to that CPU (None: not pinned)."""
+        cpu: int | None = None, rounds: int = ROUNDS) -> dict:
+    """The three kinds of run (see the module docstring), seconds [s] each
+    in all, interleaved in rounds; cpu pins the tick thread and cyclictest
+    to that CPU (None: not pinned)."""
     period = load_config().tick_period                        # [s]
     ticks = max(1, int(round(seconds / period)))
     if not cyclictest:
@@ -181,23 +226,28 @@ def run(seconds: float = SECONDS, priority: int = PRIORITY, lock_memory: bool = 
         note = f"{cyclictest} not found (Debian: apt install rt-tests)"
     else:
         note = None
-    engine = _engine_run(ticks, priority, lock_memory, 0, cpu)
-    ct = None
-    if note is None:
-        try:
-            ct = _cyclictest_run(ticks, period, priority, lock_memory, cyclictest, cpu)
-        except (RuntimeError, OSError, subprocess.TimeoutExpired) as exc:   # e.g. no SCHED_FIFO
-            note = f"failed: {exc}"
+    per_round = max(1, ticks // rounds)
+    engine_runs, ct_runs, gil_runs = [], [], []
+    for _ in range(rounds):
+        engine_runs.append(_engine_run(per_round, priority, lock_memory, 0, cpu))
+        if note is None:
+            try:
+                ct_runs.append(_cyclictest_run(per_round, period, priority, lock_memory,
+                                               cyclictest, cpu))
+            except (RuntimeError, OSError, subprocess.TimeoutExpired) as exc:  # e.g. no SCHED_FIFO
+                note = f"failed: {exc}"
+        gil_runs.append(_engine_run(per_round, priority, lock_memory, churn_threads, cpu))
     result = {
-        "engine": engine,
-        "cyclictest": ct,
-        "engine_gil_load": _engine_run(ticks, priority, lock_memory, churn_threads, cpu),
+        "engine": merge_engine_runs(engine_runs),
+        "cyclictest": merge_cyclictest_runs(ct_runs) if note is None else None,
+        "engine_gil_load": merge_engine_runs(gil_runs),
         "cyclictest_note": note,
         "machine": machine_info(),
         "seconds": seconds,
         "period_s": period,
         "priority": priority,
-        "ticks": ticks,
+        "ticks": per_round * rounds,
+        "rounds": rounds,
         "memory_locked": lock_memory,
         "cpu": cpu,
     }
@@ -262,6 +312,8 @@ def main(argv=None) -> int:
     parser.add_argument("--cyclictest", default="cyclictest", metavar="PATH",
                         help="cyclictest executable (default: found on PATH)")
     parser.add_argument("--no-cyclictest", action="store_true", help="skip the cyclictest run")
+    parser.add_argument("--rounds", type=int, default=ROUNDS, metavar="R",
+                        help=f"interleave the runs in R rounds (default {ROUNDS})")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
     args = parser.parse_args(argv)
@@ -270,7 +322,8 @@ def main(argv=None) -> int:
     if not 1 <= args.priority <= 99:
         parser.error("--priority must be 1..99")
     result = run(args.seconds, args.priority, not args.no_mlock,
-                 None if args.no_cyclictest else args.cyclictest, cpu=args.cpu)
+                 None if args.no_cyclictest else args.cyclictest, cpu=args.cpu,
+                 rounds=max(1, args.rounds))
     if args.json:
         json.dump(result, sys.stdout, indent=2)
         sys.stdout.write("\n")
