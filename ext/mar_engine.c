@@ -417,8 +417,6 @@ size_t mar_engine_drain_records(mar_engine *e, void *dst, size_t max)
 mar_sink *mar_engine_sink(mar_engine *e) { return &e->sink; }
 const mar_hist *mar_engine_wake_hist(const mar_engine *e) { return &e->wake; }
 const mar_hist *mar_engine_compute_hist(const mar_engine *e) { return &e->compute; }
-size_t mar_engine_n_axes(const mar_engine *e) { return e->n_axes; }
-size_t mar_engine_n_ticks(const mar_engine *e) { return e->n_ticks; }
 int64_t mar_engine_period_ns(const mar_engine *e) { return e->period_ns; }
 _Atomic int *mar_engine_running_flag(mar_engine *e) { return &e->running; }
 

@@ -124,8 +124,6 @@ mar_sink *mar_engine_sink(mar_engine *e);
 void mar_engine_counters(const mar_engine *e, mar_counters *c);
 const mar_hist *mar_engine_wake_hist(const mar_engine *e);     /* wake latency [ns] */
 const mar_hist *mar_engine_compute_hist(const mar_engine *e);  /* tick compute time [ns] */
-size_t mar_engine_n_axes(const mar_engine *e);
-size_t mar_engine_n_ticks(const mar_engine *e);
 int64_t mar_engine_period_ns(const mar_engine *e);
 
 /* Used by the real-time loop only. */

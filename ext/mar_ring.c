@@ -74,12 +74,6 @@ size_t mar_ring_pop(mar_ring *r, void *dst, size_t max_items)
     return n;
 }
 
-size_t mar_ring_used(const mar_ring *r)
-{
-    return atomic_load_explicit(&r->head, memory_order_acquire)
-         - atomic_load_explicit(&r->tail, memory_order_acquire);
-}
-
 uint64_t mar_ring_dropped(const mar_ring *r)
 {
     return atomic_load_explicit(&r->dropped, memory_order_relaxed);

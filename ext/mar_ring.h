@@ -30,7 +30,6 @@ int mar_ring_push(mar_ring *r, const void *item, size_t size);
 
 /* Consumer: copy up to max_items whole slots into dst; returns the count. */
 size_t mar_ring_pop(mar_ring *r, void *dst, size_t max_items);
-size_t mar_ring_used(const mar_ring *r);
 uint64_t mar_ring_dropped(const mar_ring *r);
 
 #endif

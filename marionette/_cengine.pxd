@@ -116,7 +116,6 @@ cdef extern from "mar_engine.h" nogil:
     void mar_engine_counters(const mar_engine *e, mar_counters *c)
     const mar_hist *mar_engine_wake_hist(const mar_engine *e)
     const mar_hist *mar_engine_compute_hist(const mar_engine *e)
-    size_t mar_engine_n_axes(const mar_engine *e)
 
 
 cdef extern from "mar_rtloop.h" nogil:

@@ -107,8 +107,8 @@ class Engine:
         self._writer = None
         self._attach_output(output)
         self.set_rate(rate)
-        self._threads: list[threading.Thread] = []
-        self._stop_threads = threading.Event()
+        self._drain_thread: threading.Thread | None = None
+        self._stop_drain = threading.Event()
         self.report: dict = {}
 
     def _attach_output(self, output) -> None:
@@ -170,11 +170,10 @@ class Engine:
             warnings.warn("real-time loop runs without " + ", ".join(refused)
                           + "; timing will be less regular", RuntimeWarning, stacklevel=2)
         self.report = report
-        self._stop_threads.clear()
-        self._threads = [threading.Thread(target=self._drain_loop, name="marionette-drain",
-                                          daemon=True)]
-        for t in self._threads:
-            t.start()
+        self._stop_drain.clear()
+        self._drain_thread = threading.Thread(target=self._drain_loop, name="marionette-drain",
+                                              daemon=True)
+        self._drain_thread.start()
         return report
 
     @property
@@ -184,10 +183,10 @@ class Engine:
     def stop(self) -> None:
         """Stop the real-time loop and drain what it left in the rings."""
         _raise_for(self._core.stop(), "stopping the real-time loop")
-        self._stop_threads.set()
-        for t in self._threads:
-            t.join()
-        self._threads = []
+        self._stop_drain.set()
+        if self._drain_thread is not None:
+            self._drain_thread.join()
+            self._drain_thread = None
         self._drain()
 
     def wait(self, timeout: float | None = None) -> bool:
@@ -224,7 +223,7 @@ class Engine:
     def _drain_loop(self) -> None:
         # Waits on the event between drains, so stop() wakes it at once.
         interval = DRAIN_INTERVAL if self._writer is None else self.config.tick_period / 4
-        while not self._stop_threads.wait(interval):
+        while not self._stop_drain.wait(interval):
             self._drain()
 
     # -- commands and readings -------------------------------------------
