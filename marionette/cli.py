@@ -19,7 +19,10 @@ from marionette.engine import INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
 from marionette.show import LIMIT_POLICIES, load_show
 
-BENCHES = ("tick", "jitter", "moves")
+BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync")
+# commands that live in their own modules (marionette/cmd_<name>.py, each with
+# register(subparsers) setting run=...)
+COMMAND_MODULES = ("calibrate", "teach", "plot", "sim", "sync_sim")
 
 
 def _figure_and_show(args):
@@ -150,6 +153,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="plan the speed to leave room for the lag feed-forward of lead "
                         "dead_time_lag (top speed - time_constant * acceleration)")
     p.set_defaults(run=cmd_shape)
+
+    for name in COMMAND_MODULES:
+        try:
+            module = importlib.import_module(f"marionette.cmd_{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"marionette.cmd_{name}":
+                raise
+            continue
+        module.register(sub)
 
     p = sub.add_parser("bench", help="benchmarks: " + ", ".join(BENCHES), add_help=False)
     p.add_argument("bench", choices=BENCHES)

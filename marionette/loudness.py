@@ -1,0 +1,144 @@
+"""The music's loudness, one value per 20 ms tick: the feature the engine
+correlates at the show against the one stored at teach time.
+
+The same code computes it at both times, so the two agree by construction:
+
+* band-limited RMS: the power between 60 Hz and 4 kHz of each 20 ms frame
+  (rectangular window, from the FFT of the frame). The band makes the feature
+  the same at any sample rate from 8 kHz up, and ignores hum and rumble;
+* returned linear (full scale = 1.0 for a full-scale sine in the band). The
+  volume knob multiplies every value by one factor, which the follower
+  removes by working on the logarithm with the mean taken out.
+
+Frame k covers the samples [floor(k * fs * T), floor(k * fs * T) + floor(fs * T))
+of a recording at fs [Hz] with period T [s]: the music from k * T on.
+"""
+from __future__ import annotations
+
+import wave
+from pathlib import Path
+
+import numpy as np
+
+from marionette.errors import MarionetteError
+
+FRAME_PERIOD = 0.020        # [s], one engine tick
+BAND = (60.0, 4000.0)       # [Hz] band whose power is measured
+
+
+class AudioError(MarionetteError):
+    """An audio file or device could not be read."""
+
+
+class LoudnessMeter:
+    """Turns a stream of audio blocks into loudness frames.
+
+    feed() accepts blocks of any length (mono, or (samples, channels)) and
+    returns the frames they completed; the remainder waits for the next block.
+    """
+
+    def __init__(self, sample_rate: float, period: float = FRAME_PERIOD):
+        if not (sample_rate >= 2 * BAND[1]):
+            raise AudioError(f"sample rate {sample_rate!r} Hz is below {2 * BAND[1]:g} Hz")
+        self.sample_rate = float(sample_rate)                   # [Hz]
+        self.period = float(period)                             # [s]
+        self.frame_len = int(np.floor(sample_rate * period))    # [samples]
+        freqs = np.fft.rfftfreq(self.frame_len, 1.0 / sample_rate)
+        self._band = (freqs >= BAND[0]) & (freqs <= BAND[1])
+        self._pending = np.zeros(0)                             # samples not yet framed
+        self._frames = 0                                        # frames emitted
+        self._consumed = 0                                      # [samples] dropped before _pending
+
+    def feed(self, block) -> np.ndarray:
+        x = np.asarray(block, dtype=np.float64)
+        if x.ndim == 2:
+            x = x.mean(axis=1)
+        self._pending = np.concatenate([self._pending, x])
+        starts = []
+        k = self._frames
+        while True:
+            start = int(np.floor(k * self.sample_rate * self.period)) - self._consumed
+            if start + self.frame_len > len(self._pending):
+                break
+            starts.append(start)
+            k += 1
+        if not starts:
+            return np.zeros(0)
+        idx = np.asarray(starts)[:, None] + np.arange(self.frame_len)[None, :]
+        frames = self._pending[idx]
+        self._frames = k
+        keep = int(np.floor(k * self.sample_rate * self.period)) - self._consumed
+        self._pending = self._pending[keep:]
+        self._consumed += keep
+        spectrum = np.fft.rfft(frames, axis=1)
+        # Parseval: mean square of the band = 2 * sum |X|^2 / N^2 (one-sided spectrum)
+        power = 2.0 * np.sum(np.abs(spectrum[:, self._band]) ** 2, axis=1) / self.frame_len ** 2
+        return np.sqrt(power * 2.0)      # full-scale sine (mean square 1/2) -> 1.0
+
+
+def loudness(samples, sample_rate: float, period: float = FRAME_PERIOD) -> np.ndarray:
+    """Loudness frames of a whole recording [full scale], one per period."""
+    return LoudnessMeter(sample_rate, period).feed(samples)
+
+
+def read_wav(path) -> tuple[np.ndarray, float]:
+    """Samples scaled to [-1, 1] (shape (n,) or (n, channels)) and the sample rate [Hz].
+
+    Integer PCM WAV through the standard library; any other format through
+    the optional `soundfile` package when it is installed."""
+    path = Path(path)
+    try:
+        with wave.open(str(path), "rb") as w:
+            width, channels, rate = w.getsampwidth(), w.getnchannels(), w.getframerate()
+            raw = w.readframes(w.getnframes())
+    except FileNotFoundError:
+        raise AudioError(f"{path}: no such audio file") from None
+    except (wave.Error, EOFError) as exc:
+        return _read_with_soundfile(path, exc)
+    if width == 1:
+        x = (np.frombuffer(raw, np.uint8).astype(np.float64) - 128.0) / 128.0
+    elif width == 3:
+        b = np.frombuffer(raw, np.uint8).reshape(-1, 3).astype(np.int32)
+        v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
+        x = np.where(v >= 1 << 23, v - (1 << 24), v) / float(1 << 23)
+    elif width in (2, 4):
+        x = np.frombuffer(raw, f"<i{width}").astype(np.float64) / float(1 << (8 * width - 1))
+    else:
+        raise AudioError(f"{path}: {8 * width}-bit samples are not supported")
+    if channels > 1:
+        x = x.reshape(-1, channels)
+    return x, float(rate)
+
+
+def _read_with_soundfile(path: Path, cause: Exception):
+    try:
+        import soundfile
+    except ImportError:
+        raise AudioError(f"{path}: not an integer PCM WAV file ({cause}); install the 'audio' "
+                         "extra (soundfile) to read other formats") from None
+    try:
+        x, rate = soundfile.read(str(path), dtype="float64", always_2d=False)
+    except Exception as exc:
+        raise AudioError(f"{path}: cannot read audio: {exc}") from None
+    return x, float(rate)
+
+
+def wav_loudness(path, period: float = FRAME_PERIOD) -> np.ndarray:
+    """Loudness frames of an audio file [full scale], one per period."""
+    x, rate = read_wav(path)
+    try:
+        return loudness(x, rate, period)
+    except AudioError as exc:
+        raise AudioError(f"{path}: {exc}") from None
+
+
+def write_wav(path, samples, sample_rate: int) -> None:
+    """Writes 16-bit PCM (mono, or (n, channels)), clipping to [-1, 1]."""
+    x = np.clip(np.asarray(samples, dtype=np.float64), -1.0, 1.0)
+    channels = 1 if x.ndim == 1 else x.shape[1]
+    pcm = np.round(x * 32767.0).astype("<i2")
+    with wave.open(str(path), "wb") as w:
+        w.setnchannels(channels)
+        w.setsampwidth(2)
+        w.setframerate(int(sample_rate))
+        w.writeframes(pcm.tobytes())
