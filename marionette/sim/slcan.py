@@ -21,6 +21,7 @@ class SlcanAdapter:
 
     def __init__(self):
         self._line = bytearray()
+        self._discarding = False            # inside a runaway line: skip to the next CR
         self.is_open = False
         self.bitrate_code = None
         self.bad_lines = 0                  # lines the adapter did not understand
@@ -31,15 +32,20 @@ class SlcanAdapter:
         for b in data:
             if b in (0x0D, 0x07):
                 line, self._line = bytes(self._line), bytearray()
-                if line:
+                if self._discarding:
+                    self._discarding = False
+                elif line:
                     frame, reply = self._command(line)
                     if frame is not None:
                         frames.append(frame)
                     answer += reply
+            elif self._discarding:
+                continue
             elif len(self._line) < 64:
                 self._line.append(b)
             else:                           # runaway line: drop it, resynchronise on CR
                 self._line.clear()
+                self._discarding = True
                 self.bad_lines += 1
         return frames, bytes(answer)
 
