@@ -15,3 +15,7 @@ class ShowError(MarionetteError, ValueError):
 
 class EngineError(MarionetteError, RuntimeError):
     """The C engine refused a request."""
+
+
+class TeachError(MarionetteError, ValueError):
+    """Teach-in input (markers, cameras, recording, settings) is invalid or unusable."""

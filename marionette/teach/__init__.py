@@ -12,6 +12,11 @@ One concept per module (see ``docs/teach.md``):
 * :mod:`.recording`    - CSV of per-field LED detections
 * :mod:`.synthetic`    - synthetic ground truth
 * :mod:`.pipeline`     - the steps chained together
+* :mod:`.markers`      - CSV of calibration markers
+* :mod:`.guess`        - linear starting guess of a camera from its markers
+* :mod:`.camera_file`  - cameras.toml (written by calibrate, read by teach)
+* :mod:`.settings`     - teach settings TOML (rucksack, filters, areas, axis map)
+* :mod:`.make_sample`  - the bundled sample recording and its generator
 
 Submodules are imported explicitly (``from marionette.teach.camera import ...``).
 """

@@ -14,7 +14,9 @@ in SI units.  Axis names are configuration, never hard-coded in the computation.
   ``dz_j = z_gain (z0 - z_ref) + (R' p_j)_z - p_jz`` [m], where
   ``(R' p)_z = -sin(theta') p_x + cos(theta') sin(phi') p_y + cos(theta') cos(phi') p_z``
   with ``phi' = tilt_gain phi`` and ``theta' = tilt_gain theta`` (yaw does not change
-  heights).  Positive = the point rises (string shortens) for ``gain = 1``.
+  heights).  Positive = the point rises (string shortens) for ``gain = 1``.  The axis
+  value is ``offset_j + gain_j * dz_j``: ``offset_j`` [m] is the winch position of the
+  reference pose (e.g. the middle of its travel).
 * Floodlights: pan/tilt [rad] aimed from the light position at the puppet point
   ``(x, y, target_height + z_gain (z0 - z_ref))`` [m]: ``pan = atan2(dy, dx) - pan_offset``
   (unwrapped), ``tilt = atan2(dz, hypot(dx, dy))`` (negative = below the light).
@@ -35,6 +37,7 @@ class Winch:
     name: str                                 # axis name
     attach: tuple[float, float, float]        # attachment point, body frame [m]
     gain: float = 1.0                         # axis value per vertical displacement [m/m]
+    offset: float = 0.0                       # axis value at zero displacement [m]
 
 
 @dataclass
@@ -158,7 +161,7 @@ def map_axes(pose, config: AxisMap | None = None) -> dict[str, np.ndarray]:
     for w in config.winches:
         px, py, pz = w.attach
         height = -np.sin(t) * px + np.cos(t) * np.sin(f) * py + np.cos(t) * np.cos(f) * pz
-        out[w.name] = w.gain * (lift + height - pz)
+        out[w.name] = w.offset + w.gain * (lift + height - pz)
     for light in config.lights:
         lx, ly, lz = light.position
         dx, dy = x0 - lx, y0 - ly
