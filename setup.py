@@ -42,6 +42,10 @@ extensions = [
               sorted(set(glob("ext/*.c")) - {"ext/mar_shape.c"}) + sorted(glob("firmware_protocol/*.c"))),
     # the offline pragmatic filter (timed parabolic moves between extrema)
     extension("marionette._shape", "marionette/_shape.pyx", ["ext/mar_shape.c"]),
+    # the music follower, for offline tools and tests (the engine links its own copy)
+    extension("marionette._follow", "marionette/_follow.pyx", ["ext/mar_follow.c"]),
+    # the servo protocol codec, for the simulator, the transports and the tests
+    extension("marionette._protocol", "marionette/_protocol.pyx", sorted(glob("firmware_protocol/*.c"))),
 ]
 
 setup(ext_modules=cythonize(extensions, compiler_directives={"language_level": "3"}))

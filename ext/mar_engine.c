@@ -7,6 +7,9 @@
 
 #include "mar_time.h"
 
+#define LIVE_BACKLOG 4              /* live frames kept waiting for the follower [frames] */
+#define MAX_CATCH_UP 50             /* follower steps made up after an overrun [ticks] */
+
 struct mar_engine {
     mar_engine_options opt;
     size_t n_axes, n_ticks;
@@ -22,7 +25,11 @@ struct mar_engine {
     /* tick thread only */
     double position;                /* p [show ticks] */
     double rate;                    /* r [show ticks per tick] */
-    double live_loudness;
+    double live_loudness;           /* newest live frame taken, NaN before the first */
+    double live_fifo[LIVE_BACKLOG]; /* frames waiting, oldest first (follower only) */
+    size_t live_queued;
+    mar_follow *follow;             /* NULL: the rate drives the playback clock */
+    mar_follow_out follow_out;
     int64_t tick;
     uint64_t bad_input_seen;        /* bad_input at the previous tick */
     int mode;                       /* enum mar_mode */
@@ -45,7 +52,8 @@ struct mar_engine {
     _Atomic double seek_request;
     _Atomic int seek_pending;
 
-    _Atomic uint64_t ticks, overruns, limited, bad_input;
+    _Atomic uint64_t ticks, overruns, limited, bad_input, live_skipped;
+    _Atomic uint32_t node_alarms;
     _Atomic int running;            /* real-time loop owns the tick */
 
     mar_ring records;               /* flight recorder */
@@ -140,6 +148,8 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
         ok = (*status = mar_ring_init(&e->records, mar_engine_record_size(e), opt->record_slots)) == 0;
     if (ok)
         ok = (*status = mar_ring_init(&e->loudness_in, sizeof(double), opt->loudness_slots)) == 0;
+    if (ok && opt->follow)      /* refuses a show without finite, non-negative loudness */
+        ok = (e->follow = mar_follow_create(&opt->follow_opt, e->loudness, n_ticks, status)) != NULL;
     if (!ok) {
         mar_engine_destroy(e);
         return NULL;
@@ -164,6 +174,7 @@ void mar_engine_destroy(mar_engine *e)
     if (e->loudness_in.slots)
         mar_ring_free(&e->loudness_in);
     mar_sink_free(&e->sink);
+    mar_follow_destroy(e->follow);
     free(e->axes);
     free(e->show);
     free(e->loudness);
@@ -178,13 +189,49 @@ void mar_engine_destroy(mar_engine *e)
     free(e);
 }
 
-/* Newest live loudness; older frames are consumed and dropped. */
-static void read_live_loudness(mar_engine *e)
+/* The live loudness frame of this tick, NaN when none came. Without a
+ * follower: the newest, older ones are dropped. With one: the oldest
+ * waiting, so a burst of frames (audio arrives in blocks) is spread over
+ * the next ticks; beyond LIVE_BACKLOG waiting, the oldest are skipped. */
+static double take_live_loudness(mar_engine *e)
 {
     double frames[16];
     size_t n;
-    while ((n = mar_ring_pop(&e->loudness_in, frames, 16)) > 0)
-        e->live_loudness = frames[n - 1];
+    if (!e->follow) {
+        double newest = NAN;
+        while ((n = mar_ring_pop(&e->loudness_in, frames, 16)) > 0)
+            newest = frames[n - 1];
+        return newest;
+    }
+    while ((n = mar_ring_pop(&e->loudness_in, frames, 16)) > 0) {
+        for (size_t i = 0; i < n; i++) {
+            if (e->live_queued == LIVE_BACKLOG) {
+                memmove(e->live_fifo, e->live_fifo + 1, (LIVE_BACKLOG - 1) * sizeof(double));
+                e->live_queued--;
+                atomic_fetch_add_explicit(&e->live_skipped, 1, memory_order_relaxed);
+            }
+            e->live_fifo[e->live_queued++] = frames[i];
+        }
+    }
+    if (e->live_queued == 0)
+        return NAN;
+    double oldest = e->live_fifo[0];
+    memmove(e->live_fifo, e->live_fifo + 1, (LIVE_BACKLOG - 1) * sizeof(double));
+    e->live_queued--;
+    return oldest;
+}
+
+/* The playback clock from the live music: one follower step per elapsed
+ * period (missed ones without a frame), a seek as a known start. */
+static void follow_music(mar_engine *e, double frame, int64_t elapsed_periods, int seek, double seek_to)
+{
+    if (seek)
+        mar_follow_reset(e->follow, seek_to);
+    for (int64_t k = 1; k < elapsed_periods && k <= MAX_CATCH_UP; k++)
+        mar_follow_step(e->follow, NAN, &e->follow_out);
+    mar_follow_step(e->follow, frame, &e->follow_out);
+    e->position = e->follow_out.position;
+    e->rate = e->follow_out.rate;
 }
 
 static void publish_snapshot(mar_engine *e, const mar_record *rec)
@@ -258,18 +305,26 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     /* 1. playback clock: advance by the rate in force since the last tick,
      *    then take requests. Missed periods still count (real time). The
      *    clock waits while moves or a hold drive the figure. */
-    if (e->was_playing)
-        e->position += e->rate * (double)elapsed_periods;
-    e->rate = atomic_load_explicit(&e->rate_request, memory_order_relaxed);
-    if (atomic_exchange_explicit(&e->seek_pending, 0, memory_order_acquire))
-        e->position = atomic_load_explicit(&e->seek_request, memory_order_relaxed);
+    double frame = take_live_loudness(e);
+    if (!isnan(frame))
+        e->live_loudness = frame;
+    int seek = atomic_exchange_explicit(&e->seek_pending, 0, memory_order_acquire);
+    double seek_to = atomic_load_explicit(&e->seek_request, memory_order_relaxed);
+    if (e->follow) {            /* the music runs on whatever drives the figure */
+        follow_music(e, frame, elapsed_periods, seek, seek_to);
+    } else {
+        if (e->was_playing)
+            e->position += e->rate * (double)elapsed_periods;
+        e->rate = atomic_load_explicit(&e->rate_request, memory_order_relaxed);
+        if (seek)
+            e->position = seek_to;
+    }
     if (e->position < 0.0)
         e->position = 0.0;
     if (e->position >= last) {
         e->position = last;
         flags |= MAR_FLAG_END;
     }
-    read_live_loudness(e);
     uint64_t bad = atomic_load_explicit(&e->bad_input, memory_order_relaxed);
     if (bad != e->bad_input_seen) {
         e->bad_input_seen = bad;
@@ -310,8 +365,11 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         .rate = r,
         .live_loudness = e->live_loudness,
         .stored_loudness = mar_sample(e->loudness, e->n_ticks, p, MAR_INTERP_LINEAR, &slope),
+        .follow_confidence = e->follow ? e->follow_out.confidence : NAN,
         .flags = flags,
         .limited_axes = limited,
+        .follow_state = e->follow ? e->follow_out.state : -1,
+        .node_alarms = atomic_load_explicit(&e->node_alarms, memory_order_relaxed),
     };
 
     /* 3. out to the servos, 4. flight recorder and snapshot */
@@ -372,6 +430,11 @@ int mar_engine_push_loudness(mar_engine *e, double value)
     return mar_ring_push(&e->loudness_in, &value, sizeof value);
 }
 
+void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask)
+{
+    atomic_store_explicit(&e->node_alarms, mask, memory_order_relaxed);
+}
+
 int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized)
 {
     if (kind != MAR_REQ_GOTO && kind != MAR_REQ_BLEND && kind != MAR_REQ_STOP)
@@ -427,7 +490,7 @@ void mar_engine_counters(const mar_engine *e, mar_counters *c)
     c->limited = atomic_load(&e->limited);
     c->bad_input = atomic_load(&e->bad_input);
     c->records_dropped = e->records.slots ? mar_ring_dropped(&e->records) : 0;
-    c->loudness_dropped = mar_ring_dropped(&e->loudness_in);
+    c->loudness_dropped = mar_ring_dropped(&e->loudness_in) + atomic_load(&e->live_skipped);
     c->sink_frames = atomic_load(&e->sink.frames);
     c->sink_errors = atomic_load(&e->sink.errors);
     c->sink_bytes = atomic_load(&e->sink.bytes);

@@ -10,6 +10,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "mar_follow.h"
 #include "mar_hist.h"
 #include "mar_limits.h"
 #include "mar_move.h"
@@ -40,6 +41,8 @@ typedef struct {
     size_t record_slots;        /* flight recorder capacity [ticks]; 0 = no recorder */
     size_t loudness_slots;      /* live loudness input capacity [frames] */
     int start_holding;          /* 1: start holding the start pose (mode HOLD), 0: playing the show */
+    int follow;                 /* 1: the live music's follower drives position and rate (mar_follow.h) */
+    mar_follow_options follow_opt;  /* used when follow is 1 */
 } mar_engine_options;
 
 /* Who drives the commands. */
@@ -69,10 +72,13 @@ typedef struct {
     int64_t time_ns;            /* scheduled tick time [ns]: CLOCK_MONOTONIC, or virtual in step mode */
     double position;            /* playback position p [show ticks] */
     double rate;                /* playback rate r [show ticks per tick] */
-    double live_loudness;       /* newest live loudness, NaN when none came */
+    double live_loudness;       /* newest live loudness frame taken, NaN when none came */
     double stored_loudness;     /* taught loudness at p */
+    double follow_confidence;   /* the follower's confidence [0, 1]; NaN without a follower */
     uint32_t flags;             /* MAR_FLAG_* */
     uint32_t limited_axes;      /* axes whose command was limited this tick */
+    int32_t follow_state;       /* enum mar_follow_state; -1 without a follower */
+    uint32_t node_alarms;       /* bit i: the i-th servo node is silent or faulted (set from Python) */
 } mar_record;
 
 typedef struct {
@@ -81,7 +87,7 @@ typedef struct {
     uint64_t limited;           /* axis-ticks where a limit acted */
     uint64_t bad_input;         /* refused non-finite inputs */
     uint64_t records_dropped;   /* flight recorder full */
-    uint64_t loudness_dropped;  /* live loudness input full */
+    uint64_t loudness_dropped;  /* live loudness frames lost: input full, or a backlog skipped */
     uint64_t sink_frames, sink_errors, sink_bytes;
 } mar_counters;
 
@@ -104,7 +110,8 @@ int mar_engine_step(mar_engine *e, uint64_t n);
 /* Commands from any thread, applied at the start of the next tick. */
 int mar_engine_set_rate(mar_engine *e, double rate);      /* [show ticks per tick] */
 int mar_engine_seek(mar_engine *e, double position);      /* [show ticks] */
-int mar_engine_push_loudness(mar_engine *e, double value);
+int mar_engine_push_loudness(mar_engine *e, double value);   /* one 20 ms frame, >= 0 */
+void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask); /* copied into every record */
 
 /* Ask for a move (enum mar_request); targets [unit] has n_axes values for
  * MAR_REQ_GOTO and is ignored otherwise. synchronized: all axes arrive

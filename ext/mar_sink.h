@@ -1,8 +1,25 @@
 /* Where each tick's setpoints go: encoded by a codec, then written to a
  * file descriptor from the tick thread, or queued for a Python sender.
  *
- * The codec is a function pointer so the protocol can be swapped without
- * touching the tick. Buffers are sized at setup; emitting never allocates. */
+ * The codec is a function pointer chosen by mar_sink_set: the version-1
+ * protocol (firmware_protocol/SPEC.md) on a serial line or on CAN.
+ * Buffers are sized at setup; emitting never allocates.
+ *
+ * What one tick produces:
+ *   serial  one SYNC frame, then the SETPOINT frame(s), COBS-framed, each
+ *           ended by 0x00: bytes ready for the line.
+ *   CAN     the SYNC frame, then the setpoint PDOs, as MAR_CAN_RECORD_BYTES
+ *           records laid out like Linux's struct can_frame (little-endian):
+ *             bytes 0..3   identifier, uint32 (11-bit)
+ *             byte  4      DLC, 0..8
+ *             bytes 5..7   0
+ *             bytes 8..15  data; bytes past the DLC are 0
+ *           A Python thread hands them to python-can's bus.send(); on a
+ *           descriptor (a raw SocketCAN socket) each record is one write().
+ *
+ * In the ring, a slot is a uint32 length [bytes] followed by that tick's
+ * bytes as above. Setpoints go out sorted by (node, channel), so a node's
+ * channels form one group (serial) or share PDOs (CAN). */
 #ifndef MAR_SINK_H
 #define MAR_SINK_H
 
@@ -10,14 +27,22 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "mar_proto.h"
+#include "mar_proto_can.h"
 #include "mar_ring.h"
-#include "mar_setpoint0.h"
 
 enum mar_sink_kind {
     MAR_SINK_NONE = 0,   /* setpoints are only recorded */
     MAR_SINK_FD = 1,     /* write(2) to a non-blocking descriptor, in the tick */
     MAR_SINK_RING = 2,   /* frames queued in an SPSC ring for a Python thread */
 };
+
+enum mar_sink_protocol {
+    MAR_SINK_SERIAL = 0, /* COBS frames for a serial line (the default) */
+    MAR_SINK_CAN = 1,    /* CAN frames as struct can_frame records */
+};
+
+#define MAR_CAN_RECORD_BYTES 16
 
 /* Per-axis addressing and the position -> device counts map. */
 typedef struct {
@@ -26,32 +51,40 @@ typedef struct {
     double offset;       /* [counts] at position 0 */
 } mar_axis_address;
 
-/* Codec: writes the frames for one tick; returns bytes or a negative error. */
-typedef long (*mar_encode_fn)(uint32_t tick, const mar_sp0_entry *entries, size_t n,
-                              uint8_t *buf, size_t cap);
+typedef struct mar_sink mar_sink;
 
-typedef struct {
+/* Codec: writes one tick (s->entries hold its setpoints); returns bytes or MAR_E_*. */
+typedef long (*mar_encode_fn)(mar_sink *s, uint32_t tick, uint8_t *buf, size_t cap);
+
+struct mar_sink {
     int kind;
+    int protocol;               /* enum mar_sink_protocol */
     int fd;
-    mar_ring ring;              /* slots: uint32 length [bytes] + frame */
+    mar_ring ring;              /* slots: uint32 length [bytes] + a tick's bytes */
     mar_encode_fn encode;
     size_t n_axes;
-    mar_axis_address *address;  /* n_axes */
-    mar_sp0_entry *entries;     /* n_axes, scratch */
+    mar_axis_address *address;  /* n_axes, in the engine's axis order */
+    size_t *order;              /* n_axes: axis indexes sorted by (node, channel) */
+    mar_setpoint_entry *entries;    /* n_axes, in that order, scratch */
+    mar_can_frame *can;         /* 1 + n_axes, scratch */
     uint8_t *frame;             /* frame_cap bytes, scratch */
-    size_t frame_cap;           /* [bytes] */
+    size_t frame_cap;           /* [bytes], enough for either protocol */
     _Atomic uint64_t frames;    /* ticks emitted in full */
     _Atomic uint64_t errors;    /* ticks lost: short write, full ring, codec error */
     _Atomic uint64_t bytes;     /* bytes handed on */
-} mar_sink;
+};
 
-/* Largest encoded tick [bytes] for n axes with the version-0 codec. */
+/* Largest tick for n axes [bytes], whichever protocol. */
 size_t mar_sink_frame_bytes(size_t n_axes);
 
 int mar_sink_init(mar_sink *s, size_t n_axes, const mar_axis_address *address);
 void mar_sink_free(mar_sink *s);
-/* Select the destination. ring_slots is used for MAR_SINK_RING. */
-int mar_sink_set(mar_sink *s, int kind, int fd, size_t ring_slots);
+
+/* Select the destination and the protocol. ring_slots is used for
+ * MAR_SINK_RING. -EINVAL for an address the protocol cannot carry: node
+ * 255 (the broadcast address) on serial; on CAN, nodes outside 1..127 or
+ * channels above 8. Call before the ticks start. */
+int mar_sink_set(mar_sink *s, int kind, int fd, size_t ring_slots, int protocol);
 
 /* Device counts of a position, rounded and saturated to int32. */
 int32_t mar_counts(const mar_axis_address *a, double position);

@@ -1,18 +1,6 @@
-# Declarations of the plain-C engine in ext/ and the codec in
-# firmware_protocol/. Declarations only: the binding is _core.pyx.
+# Declarations of the plain-C engine in ext/ (the protocol codec it uses is
+# declared in _cprotocol.pxd). Declarations only: the binding is _core.pyx.
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
-
-
-cdef extern from "mar_setpoint0.h" nogil:
-    ctypedef struct mar_sp0_entry:
-        uint8_t node
-        uint8_t channel
-        int32_t counts
-    size_t mar_sp0_size(size_t n)
-    long mar_sp0_encode(uint32_t tick, const mar_sp0_entry *entries, size_t n,
-                        uint8_t *buf, size_t cap)
-    long mar_sp0_decode(const uint8_t *buf, size_t len, uint32_t *tick,
-                        mar_sp0_entry *entries, size_t cap, size_t *n)
 
 
 cdef extern from "mar_hist.h" nogil:
@@ -41,6 +29,9 @@ cdef extern from "mar_sink.h" nogil:
         MAR_SINK_NONE
         MAR_SINK_FD
         MAR_SINK_RING
+        MAR_SINK_SERIAL
+        MAR_SINK_CAN
+        MAR_CAN_RECORD_BYTES
     ctypedef struct mar_axis_address:
         uint8_t node
         uint8_t channel
@@ -51,7 +42,7 @@ cdef extern from "mar_sink.h" nogil:
     ctypedef struct mar_sink:
         mar_ring ring
         size_t frame_cap
-    int mar_sink_set(mar_sink *s, int kind, int fd, size_t ring_slots)
+    int mar_sink_set(mar_sink *s, int kind, int fd, size_t ring_slots, int protocol)
     size_t mar_ring_pop(mar_ring *r, void *dst, size_t max_items)
 
 
@@ -63,6 +54,11 @@ cdef extern from "mar_move.h" nogil:
                             double amax, double duration)
     double mar_move_duration(const mar_move *m)
     double mar_move_eval(const mar_move *m, double t, double *v)
+
+
+cdef extern from "mar_follow.h" nogil:
+    ctypedef struct mar_follow_options:     # filled by marionette._follow (options_bytes)
+        pass
 
 
 cdef extern from "mar_engine.h" nogil:
@@ -79,6 +75,8 @@ cdef extern from "mar_engine.h" nogil:
         size_t record_slots
         size_t loudness_slots
         int start_holding
+        int follow
+        mar_follow_options follow_opt
     ctypedef struct mar_record:
         int64_t tick
         int64_t time_ns
@@ -86,8 +84,11 @@ cdef extern from "mar_engine.h" nogil:
         double rate
         double live_loudness
         double stored_loudness
+        double follow_confidence
         uint32_t flags
         uint32_t limited_axes
+        int32_t follow_state
+        uint32_t node_alarms
     ctypedef struct mar_counters:
         uint64_t ticks
         uint64_t overruns
@@ -108,6 +109,7 @@ cdef extern from "mar_engine.h" nogil:
     int mar_engine_set_rate(mar_engine *e, double rate)
     int mar_engine_seek(mar_engine *e, double position)
     int mar_engine_push_loudness(mar_engine *e, double value)
+    void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask)
     int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized)
     int mar_engine_snapshot(const mar_engine *e, mar_record *rec, double *commands)
     size_t mar_engine_record_size(const mar_engine *e)

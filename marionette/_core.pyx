@@ -1,5 +1,6 @@
 # cython: language_level=3, boundscheck=False, wraparound=False
-"""Binding of the C tick engine (ext/) and the setpoint codec (firmware_protocol/).
+"""Binding of the C tick engine (ext/); its setpoints are encoded by the
+protocol codec of firmware_protocol/ (bound on its own in _protocol.pyx).
 
 Validates arguments, then calls C, inside ``with nogil`` where the call may
 take time. Returns the C status codes; marionette.engine raises.
@@ -22,6 +23,9 @@ INTERP_CUBIC = 1
 SINK_NONE = MAR_SINK_NONE
 SINK_FD = MAR_SINK_FD
 SINK_RING = MAR_SINK_RING
+PROTOCOL_SERIAL = MAR_SINK_SERIAL   # enum mar_sink_protocol
+PROTOCOL_CAN = MAR_SINK_CAN
+CAN_RECORD_BYTES = MAR_CAN_RECORD_BYTES
 FLAG_LIMITED = 1        # MAR_FLAG_*
 FLAG_END = 2
 FLAG_BAD_INPUT = 4
@@ -48,7 +52,9 @@ def record_dtype(size_t n_axes):
         ("tick", "<i8"), ("time_ns", "<i8"),
         ("position", "<f8"), ("rate", "<f8"),
         ("live_loudness", "<f8"), ("stored_loudness", "<f8"),
+        ("follow_confidence", "<f8"),
         ("flags", "<u4"), ("limited_axes", "<u4"),
+        ("follow_state", "<i4"), ("node_alarms", "<u4"),
         ("command", "<f8", (n_axes,)),
     ])
 
@@ -63,7 +69,10 @@ cdef class CoreEngine:
     def __cinit__(self, double period, int lead_mode, int interp, axes,
                   cnp.ndarray[cnp.float64_t, ndim=2, mode="c"] show,
                   cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] loudness,
-                  size_t record_slots, size_t loudness_slots, bint start_holding=False):
+                  size_t record_slots, size_t loudness_slots, bint start_holding=False,
+                  bytes follow_options=None):
+        """follow_options: a filled mar_follow_options (marionette._follow.options_bytes),
+        or None to let the rate drive the playback clock."""
         axes = np.ascontiguousarray(axes, dtype=AXIS_DTYPE)
         cdef size_t n_axes = axes.shape[0]
         if show.shape[0] != n_axes or loudness.shape[0] != show.shape[1]:
@@ -92,6 +101,12 @@ cdef class CoreEngine:
         opt.record_slots = record_slots
         opt.loudness_slots = loudness_slots
         opt.start_holding = start_holding
+        opt.follow = follow_options is not None
+        if opt.follow:
+            if len(follow_options) != sizeof(mar_follow_options):
+                free(c_axes)
+                raise ValueError(f"follow_options must be {sizeof(mar_follow_options)} bytes")
+            memcpy(&opt.follow_opt, <const char *>follow_options, sizeof(mar_follow_options))
         cdef int status = 0
         self.engine = mar_engine_create(&opt, c_axes, n_axes, &show[0, 0], show.shape[1],
                                         &loudness[0], &status)
@@ -154,6 +169,9 @@ cdef class CoreEngine:
     def push_loudness(self, double value):
         return mar_engine_push_loudness(self.engine, value)
 
+    def set_node_alarms(self, uint32_t mask):
+        mar_engine_set_node_alarms(self.engine, mask)
+
     def request(self, int kind, targets=None, bint synchronized=False):
         """Move request (REQUEST_*); targets: n_axes positions [unit] for REQUEST_GOTO."""
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] t = np.ascontiguousarray(
@@ -162,8 +180,9 @@ cdef class CoreEngine:
             raise ValueError(f"{t.shape[0]} targets for {self.n_axes} axes")
         return mar_engine_request(self.engine, kind, &t[0], synchronized)
 
-    def set_sink(self, int kind, int fd, size_t ring_slots):
-        return mar_sink_set(mar_engine_sink(self.engine), kind, fd, ring_slots)
+    def set_sink(self, int kind, int fd, size_t ring_slots, int protocol=MAR_SINK_SERIAL):
+        """Where setpoints go (SINK_*) and how they are encoded (PROTOCOL_*); status code."""
+        return mar_sink_set(mar_engine_sink(self.engine), kind, fd, ring_slots, protocol)
 
     def snapshot(self):
         """(record as a one-element structured array, or None before the first tick)."""
@@ -185,7 +204,8 @@ cdef class CoreEngine:
         return out[:n]
 
     def drain_frames(self, size_t max_frames=1024):
-        """Encoded setpoint frames waiting in the ring sink, as bytes, oldest first."""
+        """Encoded ticks waiting in the ring sink, as bytes, oldest first: serial
+        frames, or CAN records (ext/mar_sink.h), one bytes object per tick."""
         cdef mar_sink *s = mar_engine_sink(self.engine)
         cdef size_t slot = sizeof(uint32_t) + s.frame_cap
         if s.ring.slot_size == 0:
@@ -259,34 +279,3 @@ def move_durations(double[::1] x0, double[::1] v0, double[::1] target, double[::
         for i in range(n):
             d[i] = mar_move_plan(&m, x0[i], v0[i], target[i], max_speed[i], max_accel[i])
     return out
-
-
-def encode_setpoints(uint32_t tick, nodes, channels, counts):
-    """One version-0 setpoint record as bytes (see firmware_protocol/mar_setpoint0.h)."""
-    cdef size_t n = len(counts), i
-    if n == 0 or n > 255 or len(nodes) != n or len(channels) != n:
-        raise ValueError(f"a version-0 record carries 1..255 entries, got {n}")
-    cdef mar_sp0_entry entries[255]
-    for i in range(n):
-        entries[i].node = nodes[i]
-        entries[i].channel = channels[i]
-        entries[i].counts = counts[i]
-    out = bytearray(mar_sp0_size(n))
-    cdef uint8_t *p = out
-    cdef long r = mar_sp0_encode(tick, entries, n, p, len(out))
-    if r < 0:
-        raise ValueError(f"setpoint encoder failed with status {r}")
-    return bytes(out)
-
-
-def decode_setpoints(const uint8_t[::1] data):
-    """Decode the record at the start of data: (status or used bytes, tick, [(node, channel, counts)])."""
-    cdef mar_sp0_entry entries[255]
-    cdef uint32_t tick = 0
-    cdef size_t n = 0, i
-    if data.shape[0] == 0:
-        return -1, 0, []
-    cdef long r = mar_sp0_decode(&data[0], data.shape[0], &tick, entries, 255, &n)
-    if r < 0:
-        return r, 0, []
-    return r, tick, [(entries[i].node, entries[i].channel, entries[i].counts) for i in range(n)]

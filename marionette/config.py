@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 from marionette.errors import ConfigError
@@ -50,6 +50,28 @@ class AxisConfig:
         return self.dead_time + self.time_constant
 
 
+FOLLOW_MODES = ("smooth", "paper")
+
+
+@dataclass(frozen=True)
+class FollowConfig:
+    """Music following (optional [follow] table): how the playback position
+    follows the live music. Times in s; marionette.follow turns them into
+    ticks for the C follower (ext/mar_follow.h, docs/music.md)."""
+
+    mode: str = "smooth"            # "smooth" (fractional rate) or "paper" (double or skip a sample)
+    rate_min: float = 0.90          # slowest playback rate [1]
+    rate_max: float = 1.10          # fastest playback rate [1]
+    latency: float = 0.0            # age of the newest loudness frame when the tick runs [s]
+    window: float = 4.0             # tracking correlation window [s]
+    lock_threshold: float = 0.6     # correlation a place needs to lock [1]
+    lock_margin: float = 0.3        # its lead over any other place [Fisher z]
+    lost_after: float = 3.0         # unclear music before searching the whole piece [s]
+    pause_after: float = 0.16       # silence where music is expected before a pause [s]
+    search_budget: int = 512        # search candidates scored per tick [1]
+    range_db: float = 25.0          # loudness range below the running peak that counts [dB]
+
+
 @dataclass(frozen=True)
 class FigureConfig:
     """A figure: its axes in order, the tick period, where it came from."""
@@ -58,6 +80,7 @@ class FigureConfig:
     tick_period: float              # [s]
     axes: tuple[AxisConfig, ...]
     source: str = "<memory>"        # file it was read from
+    follow: FollowConfig = field(default_factory=FollowConfig)  # music following
 
     @property
     def axis_names(self) -> list[str]:
@@ -140,15 +163,49 @@ def _axis(src: str, index: int, table: dict) -> AxisConfig:
     )
 
 
+# [follow] keys: (lowest, highest) allowed, inclusive; None: no bound
+_FOLLOW_RANGES = {"rate_min": (0.25, 1.0), "rate_max": (1.0, 4.0), "latency": (0.0, 10.0),
+                  "window": (0.2, 60.0), "lock_threshold": (0.0, 0.99), "lock_margin": (0.0, 1.9),
+                  "lost_after": (0.0, None), "pause_after": (0.02, None), "range_db": (1.0, 200.0)}
+
+
+def _follow(src: str, table) -> FollowConfig:
+    """The optional [follow] table; defaults for what it leaves out."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{src}: [follow] must be a table")
+    known = {f.name for f in fields(FollowConfig)}
+    for key in table:
+        if key not in known:
+            raise ConfigError(f"{src}: follow.{key} = {table[key]!r} is not a known key "
+                              f"(known: {', '.join(sorted(known))})")
+    values = {}
+    if "mode" in table:
+        if table["mode"] not in FOLLOW_MODES:
+            raise ConfigError(f"{src}: follow.mode = {table['mode']!r} is not a known mode "
+                              f"(use one of {FOLLOW_MODES})")
+        values["mode"] = table["mode"]
+    if "search_budget" in table:
+        values["search_budget"] = _integer(src, "follow.search_budget", table["search_budget"], 1, 100000)
+    for key, (lo, hi) in _FOLLOW_RANGES.items():
+        if key not in table:
+            continue
+        value = _number(src, f"follow.{key}", table[key])
+        if value < lo or (hi is not None and value > hi):
+            bound = f">= {lo!r}" if hi is None else f"in [{lo!r}, {hi!r}]"
+            raise ConfigError(f"{src}: follow.{key} = {table[key]!r} must be {bound}")
+        values[key] = value
+    return FollowConfig(**values)
+
+
 def config_from_dict(data: dict, source: str = "<memory>") -> FigureConfig:
     """Validate a parsed TOML document; errors name source, key and value."""
     figure = data.get("figure", {})
     if not isinstance(figure, dict):
         raise ConfigError(f"{source}: [figure] must be a table")
-    unknown = set(data) - {"figure", "axis"}
+    unknown = set(data) - {"figure", "axis", "follow"}
     if unknown:
         raise ConfigError(f"{source}: unknown top-level key(s) {sorted(unknown)} "
-                          "(expected [figure] and [[axis]])")
+                          "(expected [figure], [[axis]] and optionally [follow])")
     unknown = set(figure) - {"name", "tick_period", "note"}
     if unknown:
         raise ConfigError(f"{source}: unknown key(s) {sorted(unknown)} in [figure]")
@@ -174,7 +231,7 @@ def config_from_dict(data: dict, source: str = "<memory>") -> FigureConfig:
                               f"node {a.node}, channel {a.channel}")
         addresses[key] = a.name
     return FigureConfig(name=str(figure.get("name", Path(source).stem)), tick_period=period,
-                        axes=axes, source=source)
+                        axes=axes, source=source, follow=_follow(source, data.get("follow", {})))
 
 
 def load_config(path: str | Path | None = None) -> FigureConfig:

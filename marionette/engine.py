@@ -25,11 +25,16 @@ from marionette import _core
 from marionette.config import FigureConfig
 from marionette.errors import EngineError
 from marionette.recorder import FlightRecorder
+from marionette.follow import STATES as _FOLLOW_STATE_NAMES, engine_options as follower_options
 from marionette.show import Show, fit_to_figure
+from marionette.transport.supervisor import LinkSupervisor
 
 LEAD_MODES = {"dead_time_lag": _core.LEAD_DEAD_TIME_LAG, "mean_delay": _core.LEAD_MEAN_DELAY,
               "none": _core.LEAD_NONE}
 INTERPOLATIONS = {"cubic": _core.INTERP_CUBIC, "linear": _core.INTERP_LINEAR}
+PROTOCOLS = {"serial": _core.PROTOCOL_SERIAL, "can": _core.PROTOCOL_CAN}
+CAN_COUNTS_MAX = 524287  # int20 counts of a CAN setpoint PDO (firmware_protocol/SPEC.md)
+FOLLOW_STATES = dict(enumerate(_FOLLOW_STATE_NAMES))   # record follow_state -> name
 RECORD_SLOTS = 4096      # flight-recorder ring [ticks], 82 s at 20 ms
 LOUDNESS_SLOTS = 256     # live loudness input ring [frames]
 FRAME_SLOTS = 256        # setpoint frames waiting for the Python sender [ticks]
@@ -54,6 +59,9 @@ class Snapshot:
     stored_loudness: float   # taught loudness at the position
     flags: int               # marionette._core.FLAG_*
     commands: dict           # axis name -> command [unit]
+    follow_state: str | None  # the music follower's state, None without one
+    follow_confidence: float  # its confidence [0, 1], NaN without one
+    node_alarms: int         # bit i: the i-th servo node (ascending) is silent or faulted
 
 
 def axis_table(config: FigureConfig, start: np.ndarray) -> np.ndarray:
@@ -72,7 +80,11 @@ class Engine:
     (the paper: x(t+Td+tau)) or "none". interpolation: "cubic" or "linear".
     output: where setpoints go: None; a file descriptor or an object with
     fileno() (the tick writes to it itself, no GIL); or any object with
-    write(bytes) (a Python thread drains a ring into it). record: None,
+    write(bytes) (a Python thread drains a ring into it). protocol: how
+    setpoints are encoded (firmware_protocol/SPEC.md): "serial" (default:
+    per tick a SYNC and SETPOINT frames, COBS-framed) or "can" (per tick the
+    SYNC and setpoint PDO frames, as 16-byte struct can_frame records; see
+    marionette.protocol.can_records). record: None,
     True (keep records in memory) or a file path (flight record).
     start_pose: where the figure stands, at rest, when the engine is made:
     None (default) means at the show's first pose, and the show plays from
@@ -81,22 +93,29 @@ class Engine:
     """
 
     def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
-                 interpolation: str = "cubic", output=None, record=None, rate: float = 1.0,
-                 on_limits: str = "error", start_pose=None):
+                 interpolation: str = "cubic", output=None, protocol: str | None = None,
+                 record=None, rate: float = 1.0, on_limits: str = "error", start_pose=None,
+                 follow: str | None = None):
         if lead not in LEAD_MODES:
             raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {sorted(INTERPOLATIONS)}, "
                              f"not {interpolation!r}")
+        protocol = protocol or getattr(output, "protocol", "serial")
+        if protocol not in PROTOCOLS:
+            raise ValueError(f"protocol must be one of {sorted(PROTOCOLS)}, not {protocol!r}")
+        self.protocol = protocol
         self.config = config
         self.show = fit_to_figure(show, config, on_limits)
         positions = np.ascontiguousarray(self.show.positions, dtype=np.float64)
         start = positions[:, 0] if start_pose is None else self._pose(start_pose, fill=None)
+        self.follow = follow
         self._core = _core.CoreEngine(
             config.tick_period, LEAD_MODES[lead], INTERPOLATIONS[interpolation],
             axis_table(config, start), positions,
             np.ascontiguousarray(self.show.loudness, dtype=np.float64),
-            RECORD_SLOTS if record else 0, LOUDNESS_SLOTS, start_pose is not None)
+            RECORD_SLOTS if record else 0, LOUDNESS_SLOTS, start_pose is not None,
+            None if follow is None else follower_options(config, self.show, follow))
         self._request_lock = threading.Lock()
         self.recorder = None
         if record:
@@ -106,14 +125,37 @@ class Engine:
             self.recorder = FlightRecorder(self._core.record_dtype, config.axis_names, path, meta)
         self._writer = None
         self._attach_output(output)
+        self.supervisor = None      # the servo nodes' receive path, for a link (marionette.transport)
+        if hasattr(output, "start_receiving"):
+            self.supervisor = LinkSupervisor(
+                output, config, self._latest_tick, self._core.set_node_alarms,
+                on_loudness=self._push_node_loudness if follow else None)
         self.set_rate(rate)
         self._drain_thread: threading.Thread | None = None
         self._stop_drain = threading.Event()
         self.report: dict = {}
 
+    def _check_addresses(self) -> None:
+        """Every axis must be addressable by the protocol (the C sink refuses
+        otherwise; this says which axis and why)."""
+        for a in self.config.axes:
+            if self.protocol == "serial" and a.node == 255:
+                raise ValueError(f"axis {a.name!r}: node 255 is the broadcast address of the "
+                                 f"serial protocol; use nodes 0..254")
+            if self.protocol == "can":
+                if not 1 <= a.node <= 127 or a.channel > 8:
+                    raise ValueError(f"axis {a.name!r}: node {a.node}, channel {a.channel} cannot be "
+                                     f"carried on CAN (nodes 1..127, channels 0..8)")
+                reach = max(abs(a.offset + a.scale * a.min), abs(a.offset + a.scale * a.max))
+                if reach > CAN_COUNTS_MAX:
+                    raise ValueError(f"axis {a.name!r}: its limits reach {reach:.0f} counts; CAN "
+                                     f"setpoints carry at most +-{CAN_COUNTS_MAX} (smaller scale, or serial)")
+
     def _attach_output(self, output) -> None:
         if output is None:
             return
+        self._check_addresses()
+        protocol = PROTOCOLS[self.protocol]
         fd = output if isinstance(output, int) else getattr(output, "fileno", None)
         if callable(fd):
             try:
@@ -122,9 +164,10 @@ class Engine:
                 fd = None
         if isinstance(fd, int):
             os.set_blocking(fd, False)      # the tick must never block in write()
-            _raise_for(self._core.set_sink(_core.SINK_FD, fd, 0), "attaching the output")
+            _raise_for(self._core.set_sink(_core.SINK_FD, fd, 0, protocol), "attaching the output")
         elif hasattr(output, "write"):
-            _raise_for(self._core.set_sink(_core.SINK_RING, -1, FRAME_SLOTS), "attaching the output")
+            _raise_for(self._core.set_sink(_core.SINK_RING, -1, FRAME_SLOTS, protocol),
+                       "attaching the output")
             self._writer = output
         else:
             raise TypeError(f"output must be a file descriptor, have fileno() or write(), "
@@ -174,6 +217,8 @@ class Engine:
         self._drain_thread = threading.Thread(target=self._drain_loop, name="marionette-drain",
                                               daemon=True)
         self._drain_thread.start()
+        if self.supervisor is not None:
+            self.supervisor.start()
         return report
 
     @property
@@ -183,6 +228,8 @@ class Engine:
     def stop(self) -> None:
         """Stop the real-time loop and drain what it left in the rings."""
         _raise_for(self._core.stop(), "stopping the real-time loop")
+        if self.supervisor is not None:
+            self.supervisor.stop()
         self._stop_drain.set()
         if self._drain_thread is not None:
             self._drain_thread.join()
@@ -239,6 +286,34 @@ class Engine:
         if not (0.0 <= position <= self.show.n_ticks - 1):
             raise ValueError(f"position {position!r} is outside [0, {self.show.n_ticks - 1}] ticks")
         _raise_for(self._core.seek(float(position)), "seek")
+
+    def _latest_tick(self) -> int | None:
+        rec = self._core.snapshot()
+        return None if rec is None else int(rec["tick"])
+
+    def _push_node_loudness(self, value: float) -> None:
+        try:
+            self.push_loudness(value)
+        except (ValueError, EngineError):
+            pass            # counted by the C engine as bad input or a full ring
+
+    @property
+    def nodes(self):
+        """What the receive path knows of each servo node (a NodeMonitor), or None without a link."""
+        return None if self.supervisor is None else self.supervisor.nodes
+
+    def estop(self) -> None:
+        """E-stop: every node latches and brakes to rest (ESTOP), and the
+        engine's own commands ramp to rest too (stop_motion)."""
+        self.stop_motion()
+        if self.supervisor is not None:
+            self.supervisor.estop()
+
+    def release_estop(self) -> None:
+        """Release the nodes' e-stop latch; they hold where they stopped.
+        blend_in() then moves the figure back into the show."""
+        if self.supervisor is not None:
+            self.supervisor.release()
 
     def push_loudness(self, value: float) -> None:
         """Hand the tick a live loudness frame (>= 0, finite); refused frames raise."""
@@ -308,7 +383,10 @@ class Engine:
                         position=float(rec["position"]), rate=float(rec["rate"]),
                         live_loudness=float(rec["live_loudness"]),
                         stored_loudness=float(rec["stored_loudness"]), flags=int(rec["flags"]),
-                        commands=dict(zip(self.config.axis_names, map(float, rec["command"]))))
+                        commands=dict(zip(self.config.axis_names, map(float, rec["command"]))),
+                        follow_state=FOLLOW_STATES.get(int(rec["follow_state"])),
+                        follow_confidence=float(rec["follow_confidence"]),
+                        node_alarms=int(rec["node_alarms"]))
 
     def records(self) -> np.ndarray:
         """Flight-recorder records so far (requires record=...)."""

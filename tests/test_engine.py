@@ -9,7 +9,8 @@ import serial
 from hypothesis import given, settings, strategies as st
 
 from marionette import Engine, EngineError, ShowError
-from marionette._core import FLAG_BAD_INPUT, FLAG_END, FLAG_LIMITED, decode_setpoints
+from marionette import protocol
+from marionette._core import FLAG_BAD_INPUT, FLAG_END, FLAG_LIMITED
 from marionette.recorder import read_flight_record
 
 from conftest import make_figure, make_show, smooth_dance
@@ -187,19 +188,40 @@ def test_bad_inputs_are_refused_and_recorded():
         Engine(config, show, lead="psychic")
 
 
+def _ticks(messages):
+    """[(tick, entries)] from a tick stream: each tick a SYNC, then SETPOINT
+    messages of the same tick whose entries together are the tick's."""
+    ticks = []
+    for m in messages:
+        if isinstance(m, protocol.Sync):
+            ticks.append((m.tick, []))
+        else:
+            assert isinstance(m, protocol.Setpoints) and ticks and m.tick == ticks[-1][0], m
+            ticks[-1][1].extend(m.entries)
+    return ticks
+
+
 def _decode_stream(data):
-    frames = []
-    while data:
-        used, tick, entries = decode_setpoints(data)
-        assert used > 0, f"undecodable stream, status {used}"
-        frames.append((tick, entries))
-        data = data[used:]
-    return frames
+    """Ticks of a serial stream, every frame intact."""
+    deframer = protocol.Deframer()
+    messages = deframer.feed(data)
+    assert deframer.rejected == 0 and deframer.counters["bytes"] == len(data), deframer.counters
+    return _ticks(messages)
+
+
+def _decode_can(chunks):
+    """Ticks of the engine's CAN records (one bytes object per tick, or concatenated)."""
+    decoder = protocol.CanDecoder()
+    messages = [m for chunk in chunks for can_id, data in protocol.can_records(chunk)
+                for m in decoder.feed(can_id, data)]
+    assert decoder.rejected == 0, decoder.errors
+    return _ticks(messages)
 
 
 def _expected_counts(config, commands):
-    return [(a.node, a.channel, int(np.rint(a.offset + a.scale * c)))
-            for a, c in zip(config.axes, commands)]
+    """(node, channel, counts) of a tick, in the order the sink sends: by node, then channel."""
+    return sorted((a.node, a.channel, int(np.rint(a.offset + a.scale * c)))
+                  for a, c in zip(config.axes, commands))
 
 
 def test_fd_sink_writes_frames_to_a_pty(rng):
@@ -269,8 +291,96 @@ def test_many_axes_span_several_setpoint_records():
                 record=True) as engine:
         engine.step(1)
         data = engine._writer.read(100000)
-    frames = _decode_stream(data)
-    assert [len(e) for _, e in frames] == [255, 45]
+    deframer = protocol.Deframer()
+    frames = deframer.feed(data)
+    # payload 245 bytes: a group is 3 bytes + 4 per channel; a frame is closed
+    # when the next entry does not fit (60 in one group, 59 across two)
+    assert [type(m) for m in frames] == [protocol.Sync] + [protocol.Setpoints] * 6
+    assert [len(m.entries) for m in frames[1:]] == [60, 59, 60, 59, 60, 2]
+    assert _decode_stream(data) == [(0, _expected_counts(config, np.zeros(300)))]
+
+
+def _can_figure(n_axes=12):
+    """Axes on nodes 1.. with channels 0..8 (the CAN mapping's), in a shuffled order."""
+    from marionette.config import config_from_dict
+    from conftest import figure_dict
+    doc = figure_dict(n_axes)
+    for j, axis in enumerate(doc["axis"]):
+        axis.update(node=1 + j // 9, channel=j % 9, scale=-1000.0 if j % 2 else 1000.0, offset=17.0)
+    doc["axis"] = doc["axis"][::-1]
+    return config_from_dict(doc)
+
+
+def test_can_sink_feeds_python_can_style_writers(rng):
+    config = _can_figure()
+    show = make_show(config, smooth_dance(config, 100, rng))
+
+    class Bus:                                  # what CanLink.write gets: one tick's records
+        def __init__(self):
+            self.chunks = []
+
+        def write(self, records):
+            self.chunks.append(records)
+
+    bus = Bus()
+    with Engine(config, show, output=bus, protocol="can", record=True) as engine:
+        engine.step(25)
+        records = engine.records()
+        stats = engine.stats()
+    assert len(bus.chunks) == 25 and stats["sink_frames"] == 25 and stats["sink_errors"] == 0
+    ticks = _decode_can(bus.chunks)
+    assert [t for t, _ in ticks] == list(range(25))
+    for (tick, entries), rec in zip(ticks, records):
+        assert entries == _expected_counts(config, rec["command"])
+    # per tick: SYNC and one PDO per three channels of a node (9 + 3 axes: 3 + 1)
+    assert [len(c) for c in bus.chunks] == [protocol.CAN_RECORD_BYTES * 5] * 25
+    assert stats["sink_bytes"] == sum(map(len, bus.chunks))
+
+
+def test_can_sink_writes_one_record_per_write_on_a_descriptor(rng):
+    import socket
+    config = _can_figure(4)
+    show = make_show(config, smooth_dance(config, 100, rng))
+    ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)   # keeps write boundaries
+    try:
+        with Engine(config, show, output=ours.fileno(), protocol="can", record=True) as engine:
+            engine.step(6)
+            records = engine.records()
+        theirs.setblocking(False)
+        packets = []
+        while True:
+            try:
+                packets.append(theirs.recv(4096))
+            except BlockingIOError:
+                break
+    finally:
+        ours.close()
+        theirs.close()
+    assert {len(p) for p in packets} == {protocol.CAN_RECORD_BYTES} and len(packets) == 6 * 3
+    ticks = _decode_can(packets)
+    assert [t for t, _ in ticks] == list(range(6))
+    assert ticks[5][1] == _expected_counts(config, records["command"][5])
+
+
+def test_protocol_must_carry_every_axis():
+    from marionette.config import config_from_dict
+    from conftest import figure_dict
+    port = serial.serial_for_url("loop://", timeout=0)
+    show = lambda config: make_show(config, np.zeros((len(config.axes), 5)))   # noqa: E731
+    with pytest.raises(ValueError, match="protocol must be"):
+        Engine(make_figure(1), show(make_figure(1)), protocol="smoke")
+    for change, protocol_name, message in [
+            (dict(node=0), "can", "cannot be carried on CAN"),
+            (dict(node=1, channel=9), "can", "cannot be carried on CAN"),
+            (dict(node=1, scale=1e6), "can", "at most"),
+            (dict(node=255), "serial", "broadcast")]:
+        doc = figure_dict(1)
+        doc["axis"][0].update(change)
+        config = config_from_dict(doc)
+        with pytest.raises(ValueError, match=message):
+            Engine(config, show(config), output=port, protocol=protocol_name)
+        Engine(config, show(config), protocol=protocol_name).close()     # no output: nothing to carry
+    port.close()
 
 
 def test_flight_record_file_round_trip(tmp_path, rng):

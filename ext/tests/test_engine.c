@@ -1,5 +1,5 @@
 /* Standalone C test of the engine, the rings, the histogram and the
- * version-0 codec. Built by tests/test_c_build.py with -Wall -Wextra -Werror
+ * setpoint sink (protocol version 1). Built by tests/test_c_build.py with -Wall -Wextra -Werror
  * under AddressSanitizer and UBSan, and linked with --wrap=malloc (and
  * calloc, realloc, free) to prove that no tick allocates. */
 #include <math.h>
@@ -12,7 +12,10 @@
 #include "mar_hist.h"
 #include "mar_ring.h"
 #include "mar_rtloop.h"
-#include "mar_setpoint0.h"
+#include "mar_deframer.h"
+#include "mar_proto_can.h"
+#include "mar_sink.h"
+#include <unistd.h>
 
 /* --- allocation counter (link with -Wl,--wrap=malloc,...) --- */
 static long allocations;
@@ -68,7 +71,10 @@ static void test_limits_random(int cases)
         }
         for (int k = 0; k < TICKS; k++)
             loud[k] = uniform(0, 1);
-        mar_engine_options opt = { 0.02, c % 3, c % 2, TICKS, 16, c % 5 == 0 };
+        mar_engine_options opt = { .period = 0.02, .lead_mode = c % 3, .interp = c % 2,
+                                   .record_slots = TICKS, .loudness_slots = 16,
+                                   .start_holding = c % 5 == 0, .follow = c % 4 == 3 };
+        mar_follow_default_options(&opt.follow_opt);   /* the music drives p and r in every 4th case */
         int status;
         mar_engine *e = mar_engine_create(&opt, axes, AXES, show, TICKS, loud, &status);
         CHECK(e != NULL, "create failed: %d", status);
@@ -81,6 +87,8 @@ static void test_limits_random(int cases)
         for (int j = 0; j < AXES; j++)   /* some targets outside the limits: clamped */
             pose[j] = uniform(axes[j].limits.pos_min - 0.2, axes[j].limits.pos_max + 0.2);
         long before = allocations;
+        for (int i = 0; i < 12; i++)    /* live frames, a refused one among them */
+            mar_engine_push_loudness(e, i == 5 ? -1.0 : uniform(0, 1));
         mar_engine_step(e, TICKS / 4);
         mar_engine_seek(e, uniform(0, TICKS));
         mar_engine_set_rate(e, uniform(0, 3));
@@ -126,7 +134,8 @@ static void test_bad_inputs(void)
 {
     mar_axis axis = { .limits = { -1, 1, 1, 5 }, .start = 0, .address = { 1, 0, 100, 0 } };
     double show[4] = { 0, 0.1, 0.2, 0.3 }, loud[4] = { 0, 0, 0, 0 };
-    mar_engine_options opt = { 0.02, MAR_LEAD_DEAD_TIME_LAG, MAR_INTERP_CUBIC, 8, 4, 0 };
+    mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_DEAD_TIME_LAG,
+                               .interp = MAR_INTERP_CUBIC, .record_slots = 8, .loudness_slots = 4 };
     int status;
     mar_engine *e = mar_engine_create(&opt, &axis, 1, show, 4, loud, &status);
     CHECK(e != NULL, "create");
@@ -156,30 +165,128 @@ static void test_bad_inputs(void)
     CHECK(mar_engine_create(&opt, &outside, 1, show, 4, loud, &status) == NULL, "start outside limits accepted");
 }
 
-static void test_codec(void)
+/* The sink emits version-1 frames, serial and CAN, without allocating:
+ * per tick a SYNC, then every axis's counts sorted by (node, channel). */
+static void test_sink(void)
 {
-    mar_sp0_entry in[255], out[255];
-    uint8_t buf[2048];
-    for (int round = 0; round < 500; round++) {
-        size_t n = 1 + (size_t)uniform(0, 255);
-        for (size_t i = 0; i < n; i++)
-            in[i] = (mar_sp0_entry){ (uint8_t)uniform(0, 256), (uint8_t)uniform(0, 256),
-                                     (int32_t)uniform(-2147483648.0, 2147483647.0) };
-        uint32_t tick = (uint32_t)uniform(0, 4294967295.0), got_tick;
-        long len = mar_sp0_encode(tick, in, n, buf, sizeof buf);
-        CHECK(len == (long)mar_sp0_size(n), "encoded %ld bytes", len);
-        size_t got_n;
-        CHECK(mar_sp0_decode(buf, (size_t)len, &got_tick, out, 255, &got_n) == len, "decode");
-        int same = got_tick == tick && got_n == n;
-        for (size_t i = 0; same && i < n; i++)   /* field by field: the struct has padding */
-            same = in[i].node == out[i].node && in[i].channel == out[i].channel && in[i].counts == out[i].counts;
-        CHECK(same, "round trip of %zu entries", n);
-        /* any single flipped bit is caught, and a short buffer never overruns */
-        size_t at = (size_t)uniform(0, (double)len);
-        buf[at] ^= (uint8_t)(1u << (int)uniform(0, 8));
-        CHECK(mar_sp0_decode(buf, (size_t)len, &got_tick, out, 255, &got_n) < 0, "flipped bit accepted");
-        CHECK(mar_sp0_decode(buf, (size_t)len - 1, &got_tick, out, 255, &got_n) < 0, "short record accepted");
+    enum { AXES = 11, TICKS = 40 };
+    mar_axis axes[AXES];
+    double show[AXES * TICKS], loud[TICKS];
+    for (int j = 0; j < AXES; j++) {
+        axes[j] = (mar_axis){ .limits = { -1, 1, 5, 50 }, .start = 0,
+                              .address = { (uint8_t)(3 - j / 4), (uint8_t)(j % 4 * 2), 1000.0 + j, 7.0 } };
+        for (int k = 0; k < TICKS; k++)
+            show[j * TICKS + k] = 0.5 * sin(0.1 * k + j);
     }
+    for (int k = 0; k < TICKS; k++)
+        loud[k] = 0;
+    for (int protocol = MAR_SINK_SERIAL; protocol <= MAR_SINK_CAN; protocol++) {
+        for (int use_fd = 0; use_fd < 2; use_fd++) {
+            mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
+                                       .record_slots = TICKS, .loudness_slots = 4 };
+            int status, fds[2] = { -1, -1 };
+            mar_engine *e = mar_engine_create(&opt, axes, AXES, show, TICKS, loud, &status);
+            CHECK(e != NULL, "create: %d", status);
+            if (!e)
+                return;
+            mar_sink *s = mar_engine_sink(e);
+            if (use_fd) {
+                CHECK(pipe(fds) == 0, "pipe");
+                CHECK(mar_sink_set(s, MAR_SINK_FD, fds[1], 0, protocol) == 0, "fd sink");
+            } else {
+                CHECK(mar_sink_set(s, MAR_SINK_RING, -1, 64, protocol) == 0, "ring sink");
+            }
+            long before = allocations;
+            mar_engine_step(e, TICKS);
+            CHECK(allocations == before, "sink ticks allocated %ld times", allocations - before);
+            size_t rs = mar_engine_record_size(e);
+            unsigned char *rec = malloc(rs * TICKS);
+            CHECK(mar_engine_drain_records(e, rec, TICKS) == TICKS, "records");
+            /* everything the sink produced, in one buffer */
+            size_t cap = TICKS * (s->frame_cap + 4), len = 0;
+            uint8_t *buf = malloc(cap), *slot = malloc(s->ring.slot_size ? s->ring.slot_size : 1);
+            if (use_fd) {
+                ssize_t r;
+                while (len < cap && (r = read(fds[0], buf + len, cap - len)) > 0) {
+                    len += (size_t)r;
+                    if (len == atomic_load(&s->bytes))
+                        break;
+                }
+            } else {
+                while (mar_ring_pop(&s->ring, slot, 1) == 1) {
+                    uint32_t n;
+                    memcpy(&n, slot, 4);
+                    memcpy(buf + len, slot + 4, n);
+                    len += n;
+                }
+            }
+            CHECK(len == atomic_load(&s->bytes), "%zu bytes of %llu", len, (unsigned long long)atomic_load(&s->bytes));
+            /* decode: count SYNCs, check each tick's entries against the record */
+            static mar_deframer d;
+            static mar_can_rx rx;
+            mar_deframer_init(&d);
+            mar_can_rx_init(&rx);
+            int ticks = 0;
+            size_t got = 0;
+            mar_setpoint_entry tick_entries[AXES];
+            mar_msg m;
+            for (size_t at = 0; at < len;) {
+                int r;
+                if (protocol == MAR_SINK_SERIAL) {
+                    r = mar_deframer_push(&d, buf[at++], &m);
+                } else {
+                    mar_can_frame f = { (uint16_t)(buf[at] | buf[at + 1] << 8), buf[at + 4], { 0 } };
+                    memcpy(f.data, buf + at + 8, 8);
+                    at += MAR_CAN_RECORD_BYTES;
+                    r = mar_can_rx_feed(&rx, &f, &m);
+                }
+                CHECK(r >= 0, "undecodable sink output: %d", r);
+                if (r != 1)
+                    continue;
+                if (m.type == MAR_MSG_SYNC) {
+                    CHECK(got == (ticks ? AXES : 0), "tick %d had %zu entries", ticks - 1, got);
+                    CHECK(m.seq == (uint32_t)ticks, "SYNC %u, expected %d", (unsigned)m.seq, ticks);
+                    ticks++;
+                    got = 0;
+                    continue;
+                }
+                CHECK(m.type == MAR_MSG_SETPOINT && m.seq == (uint32_t)(ticks - 1), "setpoint tick");
+                for (size_t i = 0; i < m.setpoint.n && got < AXES; i++)
+                    tick_entries[got++] = m.setpoint.entry[i];
+                if (got == AXES) {      /* sorted by address; counts as the record says */
+                    const double *cmd = (const double *)(rec + rs * (size_t)(ticks - 1) + sizeof(mar_record));
+                    for (size_t i = 0; i < AXES; i++) {
+                        int j = (int)(3 - tick_entries[i].node) * 4 + tick_entries[i].channel / 2;
+                        CHECK(i == 0 || tick_entries[i - 1].node < tick_entries[i].node
+                              || tick_entries[i - 1].channel < tick_entries[i].channel, "order");
+                        CHECK(j >= 0 && j < AXES && tick_entries[i].counts == mar_counts(&axes[j].address, cmd[j]),
+                              "tick %d entry %zu", ticks - 1, i);
+                    }
+                }
+            }
+            CHECK(ticks == TICKS && got == AXES, "protocol %d fd %d: %d ticks", protocol, use_fd, ticks);
+            free(buf);
+            free(slot);
+            free(rec);
+            if (use_fd) {
+                close(fds[0]);
+                close(fds[1]);
+            }
+            mar_engine_destroy(e);
+        }
+    }
+    /* addresses a protocol cannot carry are refused */
+    mar_axis bad = axes[0];
+    double one[2] = { 0, 0 };
+    int status;
+    bad.address.node = 0;
+    mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
+                               .loudness_slots = 4 };
+    mar_engine *e = mar_engine_create(&opt, &bad, 1, one, 2, one, &status);
+    CHECK(mar_sink_set(mar_engine_sink(e), MAR_SINK_RING, -1, 4, MAR_SINK_CAN) == -22, "node 0 on CAN");
+    CHECK(mar_sink_set(mar_engine_sink(e), MAR_SINK_RING, -1, 4, 7) == -22, "unknown protocol");
+    CHECK(mar_sink_set(mar_engine_sink(e), MAR_SINK_RING, -1, 4, MAR_SINK_SERIAL) == 0, "node 0 on serial");
+    mar_engine_destroy(e);
 }
 
 static void test_ring_and_hist(void)
@@ -215,7 +322,8 @@ static void test_rtloop(void)
 {
     mar_axis axis = { .limits = { -1, 1, 1, 5 }, .start = 0, .address = { 1, 0, 100, 0 } };
     double show[100] = { 0 }, loud[100] = { 0 };
-    mar_engine_options opt = { 0.005, MAR_LEAD_DEAD_TIME_LAG, MAR_INTERP_CUBIC, 256, 4, 0 };
+    mar_engine_options opt = { .period = 0.005, .lead_mode = MAR_LEAD_DEAD_TIME_LAG,
+                               .interp = MAR_INTERP_CUBIC, .record_slots = 256, .loudness_slots = 4 };
     int status;
     mar_engine *e = mar_engine_create(&opt, &axis, 1, show, 100, loud, &status);
     mar_rtloop loop;
@@ -241,7 +349,7 @@ int main(void)
     signal(SIGPIPE, SIG_IGN);
     test_limits_random(300);
     test_bad_inputs();
-    test_codec();
+    test_sink();
     test_ring_and_hist();
     test_rtloop();
     if (failures) {

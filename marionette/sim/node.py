@@ -11,25 +11,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from marionette import protocol
 from marionette.config import AxisConfig
 from marionette.sim.servo import ServoModel
 
-# status flags (firmware_protocol/SPEC.md)
-FLAG_LIMIT = 0x01           # a setpoint was clamped to the channel's limits
-FLAG_FAULT = 0x02           # the drive reports a fault
-FLAG_WATCHDOG = 0x04        # no setpoint within the watchdog time: stopping or stopped
-FLAG_FOLLOWING = 0x08       # following error above the threshold
-FLAG_ESTOP = 0x10           # e-stop latched
-
-DEFAULT_WATCHDOG_TICKS = 5          # [ticks] without a setpoint before the node stops
+HEARTBEAT_TICKS = 50                # a HEARTBEAT at least this often, and at each state change [ticks]
+DEFAULT_WATCHDOG_TICKS = 5          # [ticks] without a setpoint before the node brakes (SPEC.md)
 FOLLOWING_ERROR = 0.25              # threshold, as a fraction of the channel's range
 
 
 @dataclass
 class NodeCounters:
-    setpoints: int = 0          # setpoint messages taken
+    setpoints: int = 0          # setpoints taken [channel-ticks]
     seq_gaps: int = 0           # tick counters skipped between setpoint messages
     clamped: int = 0            # setpoints clamped to the limits
+    stale: int = 0              # setpoint frames older than the last accepted one
     ignored_estop: int = 0      # setpoints ignored while the e-stop is latched
     watchdog_trips: int = 0
 
@@ -54,7 +50,13 @@ class SimNode:
         self.last_setpoint_time = 0.0           # model time of the last setpoint [s]
         self.estop = False
         self.watchdog = False
-        self.limited = False
+        self.limited = False                    # clamped a setpoint since the last STATUS
+        self.following = False                  # has had a setpoint since start or the last stop
+        self.nacked_estop = False               # told the host its setpoints are ignored
+        self.pending_nack: protocol.Nack | None = None   # sent after the next STATUS
+        self.last_sync: int | None = None
+        self.heartbeat_state: int | None = None # state in the last HEARTBEAT
+        self.heartbeat_due = 0                  # SYNCs until the next HEARTBEAT
 
     def counts_of(self, j: int, position: float) -> float:
         """Device counts of a position [unit] on channel j."""
@@ -63,7 +65,7 @@ class SimNode:
     def advance_to(self, t: float) -> None:
         """Run the drives up to model time t [s]; the watchdog acts on the way."""
         deadline = self.last_setpoint_time + self.watchdog_ticks * self.tick_period
-        if not self.watchdog and not self.estop and t > deadline:
+        if self.following and not self.watchdog and not self.estop and t > deadline:
             self.model.advance_to(deadline)
             self.watchdog = True
             self.counters.watchdog_trips += 1
@@ -77,12 +79,17 @@ class SimNode:
         self.model.set_command(np.clip(stop, self.model.lower, self.model.upper))
 
     def on_setpoint(self, tick: int, channel: int, counts: int, t: float) -> None:
-        """A setpoint [counts] for one channel, tick counter `tick`, at model time t [s]."""
+        """A setpoint [counts] for one channel, tick counter `tick`, at model time t [s]
+        (after on_tick accepted the frame's tick)."""
         self.advance_to(t)
         if channel not in self.channels:
+            self._nack(protocol.REASON_BAD_CHANNEL, protocol.SETPOINT, tick)
             return
         if self.estop:
             self.counters.ignored_estop += 1
+            if not self.nacked_estop:
+                self.nacked_estop = True
+                self._nack(protocol.REASON_ESTOP_LATCHED, protocol.SETPOINT, tick)
             return
         j = self.channels.index(channel)
         lo, hi = sorted((self.min_counts[j], self.max_counts[j]))
@@ -94,39 +101,101 @@ class SimNode:
         self.counters.setpoints += 1
         self.last_setpoint_time = t
         self.watchdog = False
+        self.following = True
 
-    def on_tick(self, tick: int) -> None:
-        """A setpoint batch for this tick counter arrived; counts gaps (mod 2^32)."""
+    def _nack(self, reason: int, ref_type: int, ref_seq: int) -> None:
+        if self.pending_nack is None:           # one per answer; more are only counted
+            self.pending_nack = protocol.Nack(self.node, reason, ref_type, ref_seq, self.flags())
+
+    def on_tick(self, tick: int) -> bool:
+        """A setpoint frame for tick counter `tick` arrived: False when it is
+        stale (older than the last accepted); counts skipped ticks (mod 2^32)."""
         if self.last_tick is not None:
-            gap = (tick - self.last_tick - 1) % (1 << 32)
-            if gap < (1 << 31):
-                self.counters.seq_gaps += gap
+            d = (tick - self.last_tick) % (1 << 32)
+            if d >= 1 << 31:
+                self.counters.stale += 1
+                return False
+            if d > 1:
+                self.counters.seq_gaps += d - 1
         self.last_tick = tick
+        return True
+
+    def on_sync(self, tick: int) -> None:
+        """A SYNC not newer than the last one means the host restarted."""
+        if self.last_sync is not None:
+            d = (tick - self.last_sync) % (1 << 32)
+            if d == 0 or d >= 1 << 31:
+                self.last_tick = None
+        self.last_sync = tick
 
     def on_estop(self, t: float) -> None:
         self.advance_to(t)
         if not self.estop:
             self.estop = True
+            self.nacked_estop = False
             self._ramp_to_rest()
 
     def on_release(self, t: float) -> None:
         """Release the e-stop latch; the node holds where it stopped until new setpoints come."""
         self.advance_to(t)
-        self.estop = False
-        self.last_setpoint_time = t
+        if self.estop:
+            self.estop = False
+            self.following = False              # PRE_OPERATIONAL until the next setpoint
+            self.last_tick = None
+            self.model.set_command(self.model.position)     # hold where it stopped
+
+    def on_config(self, config: protocol.Config, t: float) -> list:
+        """Take new limits and watchdog time; answers with a NACK (reason 0: accepted)."""
+        self.advance_to(t)
+        reason = protocol.config_reason(config)
+        if reason == protocol.REASON_ACCEPTED and any(c.channel not in self.channels
+                                                     for c in config.channels):
+            reason = protocol.REASON_BAD_CHANNEL
+        if reason == protocol.REASON_ACCEPTED:
+            self.watchdog_ticks = config.watchdog_ticks
+            self.tick_period = config.tick_period_us * 1e-6
+            for c in config.channels:
+                j = self.channels.index(c.channel)
+                self.min_counts[j], self.max_counts[j] = c.min_counts, c.max_counts
+        return [protocol.Nack(self.node, reason, protocol.CONFIG, config.seq, self.flags())]
 
     def flags(self) -> int:
         f = 0
         if self.limited:
-            f |= FLAG_LIMIT
+            f |= protocol.FLAG_LIMIT
         if self.watchdog:
-            f |= FLAG_WATCHDOG
+            f |= protocol.FLAG_WATCHDOG
         if self.estop:
-            f |= FLAG_ESTOP
+            f |= protocol.FLAG_ESTOP
         span = np.abs(self.model.upper - self.model.lower)
         if np.any(np.abs(self.model.command - self.model.position) > FOLLOWING_ERROR * span):
-            f |= FLAG_FOLLOWING
+            f |= protocol.FLAG_FOLLOWING
         return f
+
+    def state_code(self) -> int:
+        if self.estop:
+            return protocol.STATE_STOPPED
+        if self.following and not self.watchdog:
+            return protocol.STATE_OPERATIONAL
+        return protocol.STATE_PRE_OPERATIONAL
+
+    def answer(self, tick: int, rejected: int, noise: np.ndarray | None = None) -> list:
+        """The answer to SYNC `tick`: STATUS (then LIMIT clears), a pending
+        NACK, and a HEARTBEAT when due."""
+        state = self.state_code()
+        out = [protocol.Status(node=self.node, tick=tick, flags=self.flags(), state=state,
+                               rejected=(rejected + self.counters.stale) % 65536,
+                               seq_gaps=self.counters.seq_gaps % 65536,
+                               positions=tuple(int(c) for c in self.actual_counts(noise)))]
+        self.limited = False
+        if self.pending_nack is not None:
+            out.append(self.pending_nack)
+            self.pending_nack = None
+        self.heartbeat_due -= 1
+        if state != self.heartbeat_state or self.heartbeat_due <= 0:
+            out.append(protocol.Heartbeat(self.node, state))
+            self.heartbeat_state, self.heartbeat_due = state, HEARTBEAT_TICKS
+        return out
 
     def actual_counts(self, noise: np.ndarray | None = None) -> np.ndarray:
         """Actual positions [counts] per channel, as the encoders report them."""

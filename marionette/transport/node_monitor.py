@@ -1,18 +1,24 @@
 """What the control PC knows about each servo node: its last status, how old
 that is, and what went wrong on the way back.
 
-The transports' receive threads call on_status/on_heartbeat/on_error; the
-engine's drain thread calls check() once per tick to find nodes that fell
-silent. Thread-safe through one lock; nothing here runs in the C tick.
+The transports' receive threads hand it every message that comes back
+(take); the engine's monitor thread calls check() once per tick to find
+nodes that fell silent. Thread-safe through one lock; nothing here runs in
+the C tick.
 """
 from __future__ import annotations
 
 import threading
+from collections import deque
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-SILENT_AFTER_TICKS = 3      # a node is reported silent when its newest status is this old [ticks]
+from marionette import protocol
+
+HISTORY = 15000             # statuses kept per node: 5 min at 50 Hz
+SILENT_AFTER_TICKS = 3      # a node that missed this many STATUS answers in a row is silent [ticks]
+LINK_LOST_TICKS = 25        # no STATUS from any node for this long: every node is silent [ticks]
 
 
 @dataclass
@@ -22,20 +28,23 @@ class NodeState:
     received_at: float | None = None        # monotonic time of the newest status [s]
     flags: int = 0                          # status flags of the newest status
     positions: tuple[int, ...] = ()         # actual positions [counts] per channel
+    rejected: int = 0                       # frames the node refused (its newest STATUS, mod 2^16)
+    seq_gaps: int = 0                       # ticks it got no setpoint for (ditto)
     statuses: int = 0                       # statuses received
     heartbeats: int = 0
     errors: int = 0                         # ERROR/NACK and EMCY messages received
     silent: bool = False                    # reported silent and not heard from since
     silent_events: int = 0
-    history: list = field(default_factory=list, repr=False)   # (time [s], tick, flags) of each status
+    # (time [s], tick, flags, positions) of the newest statuses
+    history: deque = field(default_factory=lambda: deque(maxlen=HISTORY), repr=False)
 
 
 class NodeMonitor:
     """Per-node state for the nodes a figure uses."""
 
-    def __init__(self, nodes: Iterable[int], tick_period: float, keep_history: bool = True):
-        self.tick_period = tick_period                          # [s]
+    def __init__(self, nodes: Iterable[int], keep_history: bool = True, on_loudness=None):
         self.nodes = {n: NodeState(n) for n in sorted(set(nodes))}
+        self.on_loudness = on_loudness                          # called with each LOUDNESS value
         self.keep_history = keep_history
         self.frames_ok = 0
         self.frames_bad = 0                                     # rejected by the deframer or decoder
@@ -49,7 +58,26 @@ class NodeMonitor:
             self.unknown_nodes += 1
         return s
 
-    def on_status(self, node: int, tick: int, flags: int, positions, now: float | None = None) -> None:
+    def take(self, message, now: float | None = None) -> None:
+        """One message from the nodes."""
+        if isinstance(message, protocol.Status):
+            self.on_status(message.node, message.tick, message.flags, message.positions, now,
+                           message.rejected, message.seq_gaps)
+        elif isinstance(message, protocol.Heartbeat):
+            self.on_heartbeat(message.node, now)
+        elif isinstance(message, protocol.Nack):
+            if message.reason == protocol.REASON_ACCEPTED:
+                self.on_heartbeat(message.node, now)
+            else:
+                self.on_error(message.node, message.describe(), now)
+        elif isinstance(message, protocol.Loudness):
+            with self._lock:
+                self.frames_ok += 1
+            if self.on_loudness is not None:
+                self.on_loudness(message.value)
+
+    def on_status(self, node: int, tick: int, flags: int, positions, now: float | None = None,
+                  rejected: int = 0, seq_gaps: int = 0) -> None:
         now = time.monotonic() if now is None else now
         with self._lock:
             self.frames_ok += 1
@@ -60,10 +88,11 @@ class NodeMonitor:
                 s.silent = False
                 self.events.append((now, f"node {node} answers again"))
             s.last_tick, s.received_at, s.flags = tick, now, flags
+            s.rejected, s.seq_gaps = rejected, seq_gaps
             s.positions = tuple(int(p) for p in positions)
             s.statuses += 1
             if self.keep_history:
-                s.history.append((now, tick, flags))
+                s.history.append((now, tick, flags, s.positions))
 
     def on_heartbeat(self, node: int, now: float | None = None) -> None:
         with self._lock:
@@ -85,21 +114,28 @@ class NodeMonitor:
         with self._lock:
             self.frames_bad += count
 
-    def check(self, now: float | None = None) -> list[int]:
-        """Nodes newly found silent (no status for SILENT_AFTER_TICKS ticks)."""
+    def check(self, tick: int, now: float | None = None) -> list[tuple[int, int]]:
+        """(node, evidence tick) of nodes newly found silent at engine tick `tick`.
+
+        A node is silent when the other nodes have answered SILENT_AFTER_TICKS
+        SYNCs it did not (the evidence tick is the newest answered one): so a
+        receive path that lags under load does not make every node look
+        silent. When no node answers for LINK_LOST_TICKS, all are."""
         now = time.monotonic() if now is None else now
-        limit = SILENT_AFTER_TICKS * self.tick_period
         found = []
         with self._lock:
+            answered = [s.last_tick for s in self.nodes.values() if s.last_tick is not None]
+            reference = max(answered, default=-1)
+            link_lost = tick - reference > LINK_LOST_TICKS
             for s in self.nodes.values():
-                if s.silent or s.received_at is None:
+                if s.silent:
                     continue
-                if now - s.received_at > limit:
+                newest = -1 if s.last_tick is None else s.last_tick
+                if reference - newest >= SILENT_AFTER_TICKS or link_lost:
                     s.silent = True
                     s.silent_events += 1
-                    found.append(s.node)
-                    self.events.append((now, f"node {s.node} silent for more than "
-                                             f"{SILENT_AFTER_TICKS} ticks"))
+                    found.append((s.node, max(reference, newest)))
+                    self.events.append((now, f"node {s.node} silent: no STATUS after tick {newest}"))
         return found
 
     def alarm_mask(self) -> int:
@@ -107,7 +143,7 @@ class NodeMonitor:
         mask = 0
         with self._lock:
             for i, s in enumerate(self.nodes.values()):
-                if s.silent or s.flags & 0x12:          # FAULT | ESTOP
+                if s.silent or s.flags & (protocol.FLAG_FAULT | protocol.FLAG_ESTOP):
                     mask |= 1 << i
         return mask
 

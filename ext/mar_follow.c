@@ -1,0 +1,1338 @@
+/* Music following: live loudness against stored loudness, every tick.
+ *
+ * The feature. Both streams go through the same causal map, frame by
+ * frame: loudness x (linear) -> level L = 20 log10(x) [dB] -> clamped at a
+ * running peak level minus range_db (quieter detail, hum and noise do not
+ * matter). The volume knob adds a constant to L, which the correlation
+ * (Pearson: means and spreads removed per window) ignores.
+ *
+ * The line. A hypothesis "the live music is at stored position p now and
+ * moves at rate r" maps the live frame of age i (0 = newest, covering live
+ * time [now - i - 1, now - i) [ticks]) to the stored frame index
+ *     x(i) = p - r (i + 0.5) - 0.5        (stored frame j covers [j, j + 1))
+ * The live history is resampled along that line onto whole stored frames,
+ * then correlated with the stored feature at whole-frame lags d: a peak at
+ * lag d means the hypothesis is d ticks behind where the window says. The
+ * stored side's sums come from prefix sums, so each lag is one dot product.
+ *
+ * Tracking (smooth mode). State (p, r) with a Kalman filter: predict p += r;
+ * measure the lag d* (peak of the correlation over lags -3..3, refined by a
+ * parabola to a fraction of a tick) whose window has its centre c ticks in
+ * the past, so the measurement model is d* = e_p - c e_r (H = [1, -c]).
+ * The measurement's variance grows when the correlation peak is flat
+ * (quiet, sustained music), so such windows barely move the estimate; a
+ * window that is too quiet, correlates too little or lands outside the
+ * gate is not used: the position runs on at the rate (flywheel, HOLDING).
+ *
+ * Paper mode. Same correlation at lags -1, 0, +1 and rate 1: the position
+ * (whole ticks) advances by 0, 1 or 2, i.e. one stored sample is doubled
+ * or skipped.
+ *
+ * Search. When not locked: the stored feature is averaged over blocks of
+ * `coarse` ticks; the newest search_window blocks of live audio are resampled
+ * for each rate of a grid (rate_min .. rate_max by rate_step) and scored
+ * against every block offset of the piece, search_budget (offset, rate)
+ * pairs per tick, so a sweep of the whole piece takes a few ticks. The
+ * best places go into a small pool; every tick one pool entry is verified
+ * at full resolution: two half windows each give a lag, which corrects
+ * both its position and its rate, and their correlation is its score.
+ * Lock when one place is good enough (lock_threshold, a sharp peak), was
+ * verified twice in a row without a large correction, has lock_window live
+ * frames behind it, and leads every other distinct place by lock_margin in
+ * Fisher's z (more for windows shorter than verify_window: a short window
+ * proves less), after at least one whole sweep: a repeated section with a
+ * near twin elsewhere does not lock until the music tells them apart.
+ *
+ * Pause. Where the stored music says the live frame should stand clearly
+ * over the noise floor (the quietest live frame of the last 20 s; the
+ * live-minus-stored level is tracked), frames far below that, near the
+ * floor (or very far below) and steady like hiss, for pause_after ticks:
+ * the recorder stopped. The position goes back to where the silence began
+ * and holds (rate 0). Two frames clearly above the floor resume it there. */
+#include "mar_follow.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define POOL 16                 /* search candidates kept */
+#define MAX_RATES 64            /* rate grid size limit */
+#define TRACK_LAGS 3            /* tracking lags -3..3 [ticks] */
+#define VERIFY_LAGS 6           /* verification lags -6..6 [ticks] */
+#define WIDE_LAGS 12            /* tracking lags at most -12..12 [ticks] */
+#define MAX_LAGS 12
+#define LEVEL_RELEASE_DB 0.1    /* running peak level falls this much per tick [dB] */
+#define TINY 1e-10              /* loudness floor before the logarithm [full scale] */
+#define FLOOR_BLOCK 50          /* noise floor: minimum over blocks of this many frames [ticks] ... */
+#define FLOOR_BLOCKS 20         /* ... over the last this many blocks (20 s) */
+#define LOW_DB 10.0             /* a frame this far below the expected level is "low" [dB] */
+#define NEAR_FLOOR_DB 6.0       /* ... and this close to the noise floor is "silent" [dB] */
+#define STEADY_DB 2.0           /* silence changes less than this from frame to frame [dB] */
+#define MUSIC_RANGE_DB 40.0     /* stored frames this far below its loud level are not music [dB] */
+#define DEEP_DB 20.0            /* ... or this far below the expected level [dB] */
+#define AUDIBLE_DB 6.0          /* expected level this far over the floor counts as music [dB] */
+#define RESUME_DB 10.0          /* a frame this far over the floor is music again [dB] */
+#define RESUME_VAR 16.0         /* position variance after a resume [tick^2] */
+#define PAUSE_ALPHA 0.05        /* the silence's level estimate, smoothing per frame [1] */
+#define MIN_RESUME_DB 3.0       /* ... or less where the music is quiet, not below this [dB] */
+#define LOUD_DB 15.0            /* stored frames within this of the stored level count for the gain [dB] */
+#define GAIN_STEP_DB 0.5        /* the gain estimate moves at most this per frame [dB] */
+#define GAIN_ALPHA 0.1          /* live-minus-stored gain estimate smoothing per frame [1] */
+#define DISTINCT 25.0           /* candidates this far apart are different places [ticks] */
+#define MIN_SEARCH_BLOCKS 12    /* fewest live blocks before the search scores anything */
+#define SEARCH_MIN_SCORE 0.3    /* coarse score worth a pool entry [1] */
+#define COARSE_SLACK 0.15       /* unverified entries within this of the best are verified before a lock */
+#define VERIFIED_BONUS 0.1      /* see cand_rank [1] */
+#define LOCK_CONFIRM 2          /* consecutive small verifications before a lock */
+#define KAPPA_REF 0.05          /* correlation curvature of a clear peak [1/tick^2] */
+#define KAPPA_LOCK 0.05         /* a lock needs peaks at least this sharp in both halves [1/tick^2] */
+
+typedef struct {
+    double p, r;                /* position now [stored ticks], rate [stored ticks per tick] */
+    double coarse;              /* coarse score of its last sweep [1] */
+    double fine;                /* last verification score [1], NAN if none */
+    double kappa;               /* sharpness of its correlation peak, the flatter half [1/tick^2] */
+    size_t frames;              /* live frames behind its last verification [ticks] */
+    int confirmed;              /* consecutive verifications with a small correction */
+    int used;
+    int track;                  /* the tracker's own hypothesis */
+    uint64_t since;             /* first step whose frame is consistent with it */
+    uint64_t checked;           /* step of its last verification */
+    uint64_t sweep;             /* sweep that last scored it */
+} cand;
+
+struct mar_follow {
+    mar_follow_options opt;
+    size_t n;                   /* stored frames */
+    long pad;                   /* padding frames before and after the stored feature */
+    double *sf_buf, *sf;        /* stored feature sf[-pad .. n + pad) */
+    double *sdb_buf, *sdb;      /* stored level [dB], same layout */
+    double *p1, *p2;            /* prefix sums of sf and sf^2: p1[q] = sum of sf_buf[0 .. q) */
+    double s_level;             /* loud reference of the stored music [dB] */
+
+    size_t D, nc;               /* coarse block [ticks], coarse blocks */
+    long cpad;
+    double *sc_buf, *sc;        /* coarse stored feature sc[-cpad .. nc + cpad) */
+    double *c1, *c2;            /* its prefix sums */
+
+    /* live history, a ring indexed by step */
+    size_t hcap, hmask;
+    double *lf;                 /* feature, NAN when missing */
+    double *ldb;                /* level [dB], NAN when missing */
+    double *lpos;               /* position estimate at that step [stored ticks] */
+    double lvl;                 /* running peak level of the live stream [dB] */
+    int lvl_started;
+    double nf;                  /* noise floor estimate [dB]: quietest live frame of the last 20 s */
+    double floor_min[FLOOR_BLOCKS];  /* per block, its quietest frame [dB] */
+    uint64_t floor_frames;      /* frames counted into the blocks */
+
+    uint64_t t;                 /* steps done */
+    uint64_t seg_start;         /* first step of the current continuous stretch of tape */
+    uint64_t search_from;       /* first step the search may use */
+
+    /* tracker */
+    int state;
+    double p, r;                /* [stored ticks], [stored ticks per tick] */
+    double P00, P01, P11;       /* covariance of (p, r) */
+    double conf;
+    int ever;                   /* a position is known (lock or reset) */
+    uint64_t last_good;         /* step of the last accepted measurement */
+    uint64_t bad_since, quiet_since;  /* unclear / quiet steps since last_good */
+    double gain;                /* live minus stored level [dB] */
+    int have_gain;
+    uint64_t low_start;         /* first step of the current run of low frames */
+    uint64_t last_high;         /* last step whose frame was as loud as expected */
+    uint64_t low_run, silent_run;
+    double frozen;              /* position held in a pause [stored ticks] */
+    uint64_t loud_run;          /* frames over the floor while paused */
+    double resume_db;           /* a frame this far over the pause's level resumes [dB] */
+    double pause_db;            /* the level of the silence in a pause [dB] */
+    int measured;               /* a measurement was accepted since the last lock or resume */
+
+    /* search */
+    int searching;
+    cand pool[POOL];
+    size_t n_rates;
+    double rates[MAX_RATES];
+    size_t sweep_o, sweep_k;
+    uint64_t sweep_id, sweeps_done;
+    double prev2_score, prev_score, here_score;   /* best coarse score at offsets o - 2, o - 1, o */
+    double prev_rate, here_rate;
+    size_t m_eff;               /* search window of this tick [coarse blocks] */
+    size_t lc_cap;
+    double *lc;                 /* live blocks, newest first */
+    double *u;                  /* per rate: resampled live blocks, mean removed */
+    double unorm[MAX_RATES];
+
+    /* scratch for resampling */
+    size_t scap;
+    double *rs;                 /* resampled live values */
+
+    mar_follow_counters c;
+};
+
+void mar_follow_default_options(mar_follow_options *o)
+{
+    memset(o, 0, sizeof *o);
+    o->mode = MAR_FOLLOW_SMOOTH;
+    o->rate_min = 0.90;
+    o->rate_max = 1.10;
+    o->delay = 0.0;
+    o->range_db = 25.0;
+    o->window = 200;            /* 4 s */
+    o->min_window = 40;         /* 0.8 s */
+    o->verify_window = 250;     /* 5 s */
+    o->lock_window = 100;       /* 2 s */
+    o->paper_window = 25;       /* 0.5 s */
+    o->coarse = 4;              /* 80 ms blocks */
+    o->search_window = 32;      /* 2.56 s */
+    o->rate_step = 0.03;
+    o->search_budget = 512;
+    o->track_threshold = 0.4;
+    o->lock_threshold = 0.6;
+    o->lock_margin = 0.3;
+    o->hold_after = 25;         /* 0.5 s */
+    o->search_after = 25;       /* 0.5 s */
+    o->lost_after = 150;        /* 3 s */
+    o->quiet_lost_after = 1500; /* 30 s */
+    o->pause_after = 8;         /* 0.16 s */
+    o->quiet_db = 1.0;
+    o->meas_noise = 0.5;
+    o->rate_noise = 2e-4;
+}
+
+static int check_options(const mar_follow_options *o)
+{
+    if (o->mode != MAR_FOLLOW_SMOOTH && o->mode != MAR_FOLLOW_PAPER)
+        return -EINVAL;
+    if (!(o->rate_min >= 0.25 && o->rate_min <= 1.0 && o->rate_max >= 1.0 && o->rate_max <= 4.0))
+        return -EINVAL;
+    if (!(o->delay >= 0.0 && o->delay <= 1000.0) || !(o->range_db > 0.0 && o->range_db <= 200.0))
+        return -EINVAL;
+    if (o->min_window < 4 || o->window < o->min_window || o->window > 8192)
+        return -EINVAL;
+    if (o->verify_window < o->min_window || o->verify_window > 8192)
+        return -EINVAL;
+    if (o->lock_window < o->min_window || o->lock_window > o->verify_window)
+        return -EINVAL;
+    if (o->paper_window < 4 || o->paper_window > 8192)
+        return -EINVAL;
+    if (o->coarse < 1 || o->coarse > 64 || o->search_window < MIN_SEARCH_BLOCKS || o->search_window > 1024)
+        return -EINVAL;
+    if (!(o->rate_step > 0.0) || (o->rate_max - o->rate_min) / o->rate_step + 1.0 > MAX_RATES)
+        return -EINVAL;
+    if (o->search_budget < 1 || o->search_budget > 1000000)
+        return -EINVAL;
+    if (!(o->track_threshold > -1.0 && o->track_threshold < 1.0)
+        || !(o->lock_threshold > -1.0 && o->lock_threshold < 1.0)
+        || !(o->lock_margin >= 0.0 && o->lock_margin < 2.0))
+        return -EINVAL;
+    if (!(o->hold_after >= 0.0) || !(o->search_after >= 0.0) || !(o->lost_after >= 0.0)
+        || !(o->quiet_lost_after >= 0.0) || !(o->pause_after >= 1.0))
+        return -EINVAL;
+    if (!(o->hold_after < 1e12 && o->search_after < 1e12 && o->lost_after < 1e12
+          && o->quiet_lost_after < 1e12 && o->pause_after < 1e12))
+        return -EINVAL;
+    if (!(o->quiet_db >= 0.0 && o->quiet_db < 100.0) || !(o->meas_noise > 0.0 && o->meas_noise < 1e6)
+        || !(o->rate_noise >= 0.0 && o->rate_noise < 1.0))
+        return -EINVAL;
+    return 0;
+}
+
+static double level_db(double x) { return 20.0 * log10(x + TINY); }
+
+/* The feature of one frame: level clamped at a running peak minus range. */
+static double feature(double *lvl, int *started, double db, double range_db)
+{
+    if (!*started) {
+        *lvl = db;
+        *started = 1;
+    }
+    *lvl = fmax(db, *lvl - LEVEL_RELEASE_DB);
+    return fmax(db, *lvl - range_db);
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static size_t ring(const mar_follow *f, uint64_t step) { return (size_t)(step & f->hmask); }
+
+/* Live feature of age i (0 = newest); NAN when missing. */
+static double live_at(const mar_follow *f, size_t age) { return f->lf[ring(f, f->t - age)]; }
+
+/* Ages of live frames usable from step `since` on, at most cap. */
+static size_t usable(const mar_follow *f, uint64_t since, size_t cap)
+{
+    uint64_t have = f->t + 1 - (since > f->t + 1 ? f->t + 1 : since);
+    if (have > f->hcap)
+        have = f->hcap;
+    return have < cap ? (size_t)have : cap;
+}
+
+mar_follow *mar_follow_create(const mar_follow_options *opt, const double *stored, size_t n_stored,
+                              int *status)
+{
+    *status = -EINVAL;
+    if (!opt || check_options(opt) < 0 || !stored || n_stored < 2 || n_stored > ((size_t)1 << 28))
+        return NULL;
+    for (size_t i = 0; i < n_stored; i++)
+        if (!isfinite(stored[i]) || stored[i] < 0.0)
+            return NULL;
+
+    *status = -ENOMEM;
+    mar_follow *f = calloc(1, sizeof *f);
+    if (!f)
+        return NULL;
+    f->opt = *opt;
+    f->n = n_stored;
+    size_t longest = opt->window > opt->verify_window ? opt->window : opt->verify_window;
+    if (opt->paper_window > longest)
+        longest = opt->paper_window;
+    size_t search_span = (size_t)((double)(opt->search_window + 2) * (double)opt->coarse / opt->rate_min) + 2;
+    if (search_span > longest)
+        longest = search_span;
+    f->hcap = 64;
+    while (f->hcap < longest + 64)
+        f->hcap <<= 1;
+    f->hmask = f->hcap - 1;
+    f->pad = (long)((double)f->hcap * opt->rate_max) + 4 * MAX_LAGS + 8;
+    f->D = opt->coarse;
+    f->nc = (n_stored + f->D - 1) / f->D;
+    f->cpad = (long)opt->search_window + 4;
+    f->scap = (size_t)((double)f->hcap * opt->rate_max) + 8;
+
+    size_t nf = n_stored + 2 * (size_t)f->pad, ncb = f->nc + 2 * (size_t)f->cpad;
+    f->n_rates = (size_t)floor((opt->rate_max - opt->rate_min) / opt->rate_step + 1e-9) + 1;
+    f->sf_buf = malloc(nf * sizeof(double));
+    f->sdb_buf = malloc(nf * sizeof(double));
+    f->p1 = malloc((nf + 1) * sizeof(double));
+    f->p2 = malloc((nf + 1) * sizeof(double));
+    f->sc_buf = malloc(ncb * sizeof(double));
+    f->c1 = malloc((ncb + 1) * sizeof(double));
+    f->c2 = malloc((ncb + 1) * sizeof(double));
+    f->lf = malloc(f->hcap * sizeof(double));
+    f->ldb = malloc(f->hcap * sizeof(double));
+    f->lpos = malloc(f->hcap * sizeof(double));
+    f->lc_cap = (size_t)ceil((double)opt->search_window / opt->rate_min) + 4;
+    f->lc = malloc(f->lc_cap * sizeof(double));
+    f->u = malloc(f->n_rates * opt->search_window * sizeof(double));
+    f->rs = malloc(f->scap * sizeof(double));
+    double *sorted = malloc(n_stored * sizeof(double));
+    if (!f->sf_buf || !f->sdb_buf || !f->p1 || !f->p2 || !f->sc_buf || !f->c1 || !f->c2 || !f->lf
+        || !f->ldb || !f->lpos || !f->lc || !f->u || !f->rs || !sorted) {
+        free(sorted);
+        mar_follow_destroy(f);
+        return NULL;
+    }
+    f->sf = f->sf_buf + f->pad;
+    f->sdb = f->sdb_buf + f->pad;
+    f->sc = f->sc_buf + f->cpad;
+
+    /* stored feature: the same map as live frames, its peak level starting
+     * at the loud reference (90th percentile) so that silence before the
+     * music reads as the floor, as it will live */
+    for (size_t i = 0; i < n_stored; i++)
+        sorted[i] = level_db(stored[i]);
+    qsort(sorted, n_stored, sizeof(double), cmp_double);
+    f->s_level = sorted[(size_t)(0.9 * (double)(n_stored - 1))];
+    free(sorted);
+    double lvl = f->s_level;
+    int started = 1;
+    for (size_t i = 0; i < n_stored; i++) {
+        f->sdb[i] = level_db(stored[i]);
+        f->sf[i] = feature(&lvl, &started, f->sdb[i], opt->range_db);
+    }
+    double silence = f->s_level - opt->range_db;
+    for (long i = 1; i <= f->pad; i++) {
+        f->sf[-i] = silence;
+        f->sdb[-i] = level_db(0.0);
+        f->sf[(long)n_stored - 1 + i] = silence;
+        f->sdb[(long)n_stored - 1 + i] = level_db(0.0);
+    }
+    f->p1[0] = f->p2[0] = 0.0;
+    for (size_t q = 0; q < nf; q++) {
+        f->p1[q + 1] = f->p1[q] + f->sf_buf[q];
+        f->p2[q + 1] = f->p2[q] + f->sf_buf[q] * f->sf_buf[q];
+    }
+    /* coarse blocks */
+    for (long m = -f->cpad; m < (long)f->nc + f->cpad; m++) {
+        double s = 0.0;
+        for (size_t k = 0; k < f->D; k++)
+            s += f->sf[m * (long)f->D + (long)k];
+        f->sc[m] = s / (double)f->D;
+    }
+    f->c1[0] = f->c2[0] = 0.0;
+    for (size_t q = 0; q < ncb; q++) {
+        f->c1[q + 1] = f->c1[q] + f->sc_buf[q];
+        f->c2[q + 1] = f->c2[q] + f->sc_buf[q] * f->sc_buf[q];
+    }
+    for (size_t k = 0; k < f->n_rates; k++)
+        f->rates[k] = opt->rate_min + opt->rate_step * (double)k;
+
+    for (size_t i = 0; i < f->hcap; i++)
+        f->lf[i] = f->ldb[i] = NAN, f->lpos[i] = 0.0;
+    f->nf = INFINITY;
+    for (int b = 0; b < FLOOR_BLOCKS; b++)
+        f->floor_min[b] = INFINITY;
+    mar_follow_reset(f, NAN);
+    *status = 0;
+    return f;
+}
+
+void mar_follow_destroy(mar_follow *f)
+{
+    if (!f)
+        return;
+    free(f->sf_buf);
+    free(f->sdb_buf);
+    free(f->p1);
+    free(f->p2);
+    free(f->sc_buf);
+    free(f->c1);
+    free(f->c2);
+    free(f->lf);
+    free(f->ldb);
+    free(f->lpos);
+    free(f->lc);
+    free(f->u);
+    free(f->rs);
+    free(f);
+}
+
+static void clear_pool(mar_follow *f)
+{
+    memset(f->pool, 0, sizeof f->pool);
+}
+
+/* from: the first step whose frame the search may use. */
+static void start_search(mar_follow *f, uint64_t from)
+{
+    if (f->searching)
+        return;
+    f->searching = 1;
+    f->search_from = from > f->seg_start ? from : f->seg_start;
+    clear_pool(f);
+    f->sweep_o = 1;
+    f->sweep_k = 0;
+    f->sweep_id++;
+    f->sweeps_done = 0;
+    f->prev_score = f->prev2_score = f->here_score = -2.0;
+}
+
+static void stop_search(mar_follow *f)
+{
+    f->searching = 0;
+    clear_pool(f);
+}
+
+static void kf_init(mar_follow *f, double var_p, double var_r)
+{
+    f->P00 = var_p;
+    f->P01 = 0.0;
+    f->P11 = var_r;
+}
+
+void mar_follow_reset(mar_follow *f, double position)
+{
+    f->low_run = f->silent_run = f->loud_run = 0;
+    f->bad_since = f->quiet_since = 0;
+    f->last_good = f->t;
+    f->seg_start = f->t + 1;          /* older frames belong to another stretch of tape */
+    f->have_gain = 0;
+    stop_search(f);
+    if (isfinite(position)) {
+        double last = (double)f->n;
+        f->p = position < 0.0 ? 0.0 : position > last ? last : position;
+        f->r = 1.0;
+        f->ever = 1;
+        f->state = MAR_FOLLOW_HOLDING;
+        f->conf = 0.0;
+        kf_init(f, 1.0, 1e-4);
+    } else {
+        f->p = 0.0;
+        f->r = 0.0;
+        f->ever = 0;
+        f->state = MAR_FOLLOW_SEARCHING;
+        f->conf = 0.0;
+        kf_init(f, 1e6, 1e-2);
+        start_search(f, f->seg_start);
+    }
+}
+
+/* --- correlation along a line ------------------------------------------ */
+
+/* Resamples the live history along the line (p, r) onto whole stored frames
+ * j0 .. j0 + m - 1, using live ages below `ages`. Missing frames take the
+ * mean (they add nothing to the covariance). Returns m (0 if too few live
+ * frames); *center: mean (age + 0.5) of the samples [ticks]. */
+static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0, double *center)
+{
+    if (ages < 2 || !(r > 0.0))
+        return 0;
+    double xa = p - r * ((double)(ages - 1) + 0.5) - 0.5;     /* oldest frame's stored index */
+    double xb = p - r * 0.5 - 0.5;                             /* newest */
+    long ja = (long)ceil(xa), jb = (long)floor(xb);
+    if (jb < ja)
+        return 0;
+    size_t m = (size_t)(jb - ja + 1);
+    if (m > f->scap)
+        m = f->scap, ja = jb - (long)m + 1;
+    if (ja < -f->pad + MAX_LAGS + 1 || jb > (long)f->n + f->pad - MAX_LAGS - 2)
+        return 0;                                             /* outside the padded piece */
+    double sum = 0.0, csum = 0.0;
+    size_t valid = 0;
+    for (size_t k = 0; k < m; k++) {
+        double a = (p - 0.5 - (double)(ja + (long)k)) / r - 0.5;   /* live age of this stored frame */
+        if (a < 0.0)
+            a = 0.0;
+        size_t i0 = (size_t)a;
+        double fr = a - (double)i0;
+        double v0 = live_at(f, i0);
+        double v = v0;
+        if (fr > 0.0 && i0 + 1 < ages) {
+            double v1 = live_at(f, i0 + 1);
+            v = v0 + fr * (v1 - v0);
+        }
+        f->rs[k] = v;
+        if (!isnan(v)) {
+            sum += v;
+            csum += a + 0.5;
+            valid++;
+        }
+    }
+    if (valid < 2)
+        return 0;
+    double mean = sum / (double)valid;
+    for (size_t k = 0; k < m; k++)
+        f->rs[k] = isnan(f->rs[k]) ? 0.0 : f->rs[k] - mean;
+    *j0 = ja;
+    *center = csum / (double)valid;
+    return m;
+}
+
+/* Pearson correlation of rs[k0 .. k0 + len) (mean removed) with the stored
+ * feature at frames j0 + k0 + d + k, for d = -lags .. lags. Also returns
+ * the live spread [dB]. */
+static double correlate(const mar_follow *f, const double *rs, size_t k0, size_t len, long j0, int lags,
+                        double *rho)
+{
+    const double *l = rs + k0;
+    double lm = 0.0;
+    for (size_t k = 0; k < len; k++)
+        lm += l[k];
+    lm /= (double)len;
+    double ll = 0.0;
+    for (size_t k = 0; k < len; k++)
+        ll += (l[k] - lm) * (l[k] - lm);
+    for (int d = -lags; d <= lags; d++) {
+        long js = j0 + (long)k0 + d;
+        const double *s = f->sf + js;
+        double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+        size_t k = 0;
+        for (; k + 4 <= len; k += 4) {                 /* four sums: independent adds */
+            a0 += (l[k] - lm) * s[k];
+            a1 += (l[k + 1] - lm) * s[k + 1];
+            a2 += (l[k + 2] - lm) * s[k + 2];
+            a3 += (l[k + 3] - lm) * s[k + 3];
+        }
+        for (; k < len; k++)
+            a0 += (l[k] - lm) * s[k];
+        double cov = a0 + a1 + a2 + a3;
+        size_t q = (size_t)(js + f->pad);
+        double s1 = f->p1[q + len] - f->p1[q], s2 = f->p2[q + len] - f->p2[q];
+        double ss = s2 - s1 * s1 / (double)len;
+        rho[d + lags] = (ll > 1e-9 && ss > 1e-9) ? cov / sqrt(ll * ss) : 0.0;
+    }
+    return sqrt(ll / (double)len);
+}
+
+/* Peak of rho[0 .. 2 lags]: returns its lag [ticks] refined by a parabola,
+ * *peak its height, *kappa its curvature [1/tick^2], *edge 1 if the
+ * maximum is at either end (not a peak). */
+static double peak(const double *rho, int lags, double *height, double *kappa, int *edge)
+{
+    int b = 0;
+    for (int i = 1; i <= 2 * lags; i++)
+        if (rho[i] > rho[b])
+            b = i;
+    *height = rho[b];
+    *edge = b == 0 || b == 2 * lags;
+    if (*edge) {
+        *kappa = 0.0;
+        return (double)(b - lags);
+    }
+    double y0 = rho[b - 1], y1 = rho[b], y2 = rho[b + 1];
+    double den = y0 - 2.0 * y1 + y2;
+    *kappa = -den;
+    double off = den < 0.0 ? 0.5 * (y0 - y2) / den : 0.0;
+    if (off > 0.5)
+        off = 0.5;
+    if (off < -0.5)
+        off = -0.5;
+    *height = y1 - 0.25 * (y0 - y2) * off;
+    return (double)(b - lags) + off;
+}
+
+/* --- the search ---------------------------------------------------------- */
+
+/* Live blocks of `coarse` frames, newest first, and for each rate of the
+ * grid the blocks resampled to stored block spacing, mean removed. Sets
+ * f->m_eff (0: too little live audio yet). */
+static void prepare_search(mar_follow *f)
+{
+    const size_t D = f->D;
+    size_t ages = usable(f, f->search_from, f->hcap);
+    size_t nblocks = ages / D;
+    if (nblocks > f->lc_cap)
+        nblocks = f->lc_cap;
+    f->m_eff = 0;
+    if (nblocks < 2)
+        return;
+    size_t valid_blocks = 0;
+    for (size_t b = 0; b < nblocks; b++) {
+        double s = 0.0;
+        size_t cnt = 0;
+        for (size_t k = 0; k < D; k++) {
+            double v = live_at(f, b * D + k);
+            if (!isnan(v))
+                s += v, cnt++;
+        }
+        f->lc[b] = cnt ? s / (double)cnt : NAN;
+        if (cnt)
+            valid_blocks++;
+    }
+    /* blocks of the window in stored spacing: m in [0, m_eff) needs live block
+     * (m + 0.5) / r - 0.5 < nblocks - 1 for the slowest rate */
+    size_t m_eff = (size_t)floor(((double)nblocks - 0.5) * f->opt.rate_min - 0.5);
+    if (m_eff > f->opt.search_window)
+        m_eff = f->opt.search_window;
+    if (m_eff < MIN_SEARCH_BLOCKS || valid_blocks < MIN_SEARCH_BLOCKS)
+        return;
+    double spread_sum = 0.0;
+    for (size_t k = 0; k < f->n_rates; k++) {
+        double r = f->rates[k], *u = f->u + k * f->opt.search_window;
+        double sum = 0.0;
+        size_t cnt = 0;
+        for (size_t m = 0; m < m_eff; m++) {
+            double a = ((double)m + 0.5) / r - 0.5;
+            size_t i0 = (size_t)(a < 0.0 ? 0.0 : a);
+            double fr = a - (double)i0;
+            if (fr < 0.0)
+                fr = 0.0;
+            double v0 = f->lc[i0], v1 = i0 + 1 < nblocks ? f->lc[i0 + 1] : v0;
+            double v = isnan(v0) ? v1 : isnan(v1) ? v0 : v0 + fr * (v1 - v0);
+            u[m] = v;
+            if (!isnan(v))
+                sum += v, cnt++;
+        }
+        double mean = cnt ? sum / (double)cnt : 0.0, ss = 0.0;
+        for (size_t m = 0; m < m_eff; m++) {
+            u[m] = isnan(u[m]) ? 0.0 : u[m] - mean;
+            ss += u[m] * u[m];
+        }
+        f->unorm[k] = sqrt(ss);
+        spread_sum += sqrt(ss / (double)m_eff);
+    }
+    if (spread_sum / (double)f->n_rates < f->opt.quiet_db)
+        return;                                       /* too quiet or flat to search */
+    f->m_eff = m_eff;
+}
+
+/* Coarse score of block offset o (now = stored position o * coarse) at rate k. */
+static double coarse_score(const mar_follow *f, long o, size_t k)
+{
+    const size_t M = f->m_eff;
+    const double *u = f->u + k * f->opt.search_window;
+    const double *s = f->sc + o - 1;                  /* s[-m] is block o - 1 - m */
+    double a0 = 0.0, a1 = 0.0;
+    size_t m = 0;
+    for (; m + 2 <= M; m += 2) {
+        a0 += u[m] * s[-(long)m];
+        a1 += u[m + 1] * s[-(long)m - 1];
+    }
+    for (; m < M; m++)
+        a0 += u[m] * s[-(long)m];
+    size_t qa = (size_t)(o - (long)M + f->cpad), qb = (size_t)(o + f->cpad);
+    double s1 = f->c1[qb] - f->c1[qa], s2 = f->c2[qb] - f->c2[qa];
+    double ss = s2 - s1 * s1 / (double)M;
+    if (!(ss > 1e-9) || !(f->unorm[k] > 1e-9))
+        return 0.0;
+    return (a0 + a1) / (f->unorm[k] * sqrt(ss));
+}
+
+/* Fisher's z of a correlation: differences of z compare correlations fairly
+ * near 1, where a small step in rho is a large step in unexplained variance. */
+static double fisher(double rho)
+{
+    rho = rho > 0.999 ? 0.999 : rho < -0.999 ? -0.999 : rho;
+    return atanh(rho);
+}
+
+/* For eviction: a verified entry counts its fine score plus a bonus (block
+ * averages correlate higher than single frames, so coarse scores run high). */
+static double cand_rank(const cand *e) { return isnan(e->fine) ? e->coarse : e->fine + VERIFIED_BONUS; }
+
+/* A scored place: refresh the pool entry near it, or take a free place, or
+ * replace the weakest entry (never the tracker's own) if better. */
+static void offer(mar_follow *f, double p, double r, double score)
+{
+    cand *slot = NULL, *weakest = NULL;
+    for (int i = 0; i < POOL; i++) {
+        cand *e = &f->pool[i];
+        if (!e->used) {
+            if (!slot)
+                slot = e;
+            continue;
+        }
+        if (fabs(e->p - p) < DISTINCT) {
+            if (e->sweep != f->sweep_id || score > e->coarse) {   /* fresh score each sweep */
+                e->sweep = f->sweep_id;
+                e->coarse = score;
+                if (!e->track && isnan(e->fine)) {                /* not verified yet: the better guess */
+                    e->p = p;
+                    e->r = r;
+                }
+            }
+            return;
+        }
+        if (!e->track && (!weakest || cand_rank(e) < cand_rank(weakest)))
+            weakest = e;
+    }
+    if (!slot) {
+        if (!weakest || cand_rank(weakest) >= score)
+            return;
+        slot = weakest;
+    }
+    /* live ticks its window covered: frames before are not known to fit */
+    uint64_t span = (uint64_t)((double)(f->m_eff * f->D) / r) + f->D;
+    memset(slot, 0, sizeof *slot);
+    slot->used = 1;
+    slot->p = p;
+    slot->r = r;
+    slot->coarse = score;
+    slot->fine = NAN;
+    slot->sweep = f->sweep_id;
+    slot->since = f->t + 1 > span ? f->t + 1 - span : 0;
+    if (slot->since < f->search_from)
+        slot->since = f->search_from;
+    slot->checked = f->t;
+}
+
+/* Score the next search_budget (offset, rate) pairs of the sweep. Per
+ * offset the best rate counts; only local maxima over offsets are offered. */
+static void sweep(mar_follow *f)
+{
+    size_t budget = f->opt.search_budget;
+    while (budget > 0) {
+        if (f->sweep_o > f->nc) {                     /* a sweep is complete */
+            if (f->prev_score >= SEARCH_MIN_SCORE && f->prev_score > f->prev2_score)
+                offer(f, (double)((f->sweep_o - 1) * f->D), f->prev_rate, f->prev_score);
+            f->sweeps_done++;
+            f->sweep_id++;
+            f->sweep_o = 1;
+            f->sweep_k = 0;
+            f->prev_score = f->prev2_score = f->here_score = -2.0;
+        }
+        long o = (long)f->sweep_o;
+        double s = coarse_score(f, o, f->sweep_k);
+        if (s > f->here_score)
+            f->here_score = s, f->here_rate = f->rates[f->sweep_k];
+        budget--;
+        if (++f->sweep_k >= f->n_rates) {             /* offset o done: was o - 1 a peak? */
+            if (f->prev_score >= SEARCH_MIN_SCORE && f->prev_score >= f->prev2_score
+                && f->prev_score > f->here_score)
+                offer(f, (double)((f->sweep_o - 1) * f->D), f->prev_rate, f->prev_score);
+            f->prev2_score = f->prev_score;
+            f->prev_score = f->here_score;
+            f->prev_rate = f->here_rate;
+            f->here_score = -2.0;
+            f->sweep_k = 0;
+            f->sweep_o++;
+        }
+    }
+}
+
+/* Full-resolution check of a pool entry: the lags of the older and the
+ * newer half of its window correct its position and rate; their mean
+ * correlation is its score. */
+static void verify(mar_follow *f, cand *e)
+{
+    e->checked = f->t;
+    size_t ages = usable(f, e->since, f->opt.verify_window);
+    e->frames = ages;
+    long j0;
+    double center;
+    size_t m = ages >= f->opt.min_window ? resample(f, e->p, e->r, ages, &j0, &center) : 0;
+    if (m < 16) {
+        e->fine = NAN;
+        return;
+    }
+    size_t h = m / 2;
+    double rho[2 * MAX_LAGS + 1], lag[2], height[2], ctr[2], kappa[2];
+    int edge[2];
+    for (int half = 0; half < 2; half++) {
+        size_t k0 = half ? h : 0, len = half ? m - h : h;
+        correlate(f, f->rs, k0, len, j0, VERIFY_LAGS, rho);
+        lag[half] = peak(rho, VERIFY_LAGS, &height[half], &kappa[half], &edge[half]);
+        /* live age (+ 0.5) at the half's middle stored frame */
+        double jmid = (double)j0 + (double)k0 + 0.5 * (double)(len - 1);
+        ctr[half] = (e->p - 0.5 - jmid) / e->r;
+    }
+    (void)center;
+    e->kappa = fmin(kappa[0], kappa[1]);
+    /* half 0 is the older (smaller stored index) */
+    if (edge[1] || height[1] < f->opt.track_threshold) {
+        e->fine = fmin(height[0], height[1]);
+        e->confirmed = 0;
+        if (!edge[1])
+            e->p += lag[1];
+        return;
+    }
+    if (edge[0] || height[0] < f->opt.track_threshold) {
+        /* the older half does not fit (the tape jumped, or the place is wrong):
+         * keep only the newer frames from now on */
+        e->p += lag[1];
+        e->since = f->t + 1 - (ages - ages / 2);
+        e->fine = 0.5 * (height[0] + height[1]);
+        e->confirmed = 0;
+        return;
+    }
+    double er = (lag[1] - lag[0]) / (ctr[0] - ctr[1]);   /* rate error [stored ticks per tick] */
+    if (er > 0.03)
+        er = 0.03;
+    if (er < -0.03)
+        er = -0.03;
+    double ep = lag[1] + er * ctr[1];                     /* position error now [ticks] */
+    e->p += ep;
+    e->r += er;
+    if (e->r < f->opt.rate_min)
+        e->r = f->opt.rate_min;
+    if (e->r > f->opt.rate_max)
+        e->r = f->opt.rate_max;
+    e->fine = 0.5 * (height[0] + height[1]);
+    if (fabs(ep) < 1.0 && fabs(er) < 0.004)
+        e->confirmed++;
+    else
+        e->confirmed = 0;
+}
+
+/* Merge entries that converged onto the same place. */
+static void dedup(mar_follow *f)
+{
+    for (int i = 0; i < POOL; i++) {
+        if (!f->pool[i].used)
+            continue;
+        for (int j = i + 1; j < POOL; j++) {
+            cand *a = &f->pool[i], *b = &f->pool[j];
+            if (!b->used || fabs(a->p - b->p) >= 0.5 * DISTINCT)
+                continue;
+            int drop_b = a->track || (!b->track && cand_rank(a) >= cand_rank(b));
+            cand *loser = drop_b ? b : a, *keeper = drop_b ? a : b;
+            if (loser->coarse > keeper->coarse)
+                keeper->coarse = loser->coarse;
+            loser->used = 0;
+            if (!a->used)
+                break;
+        }
+    }
+}
+
+/* The entry to verify next: unverified ones by coarse score, then the
+ * longest unchecked, favouring the better. */
+static cand *next_to_verify(mar_follow *f)
+{
+    cand *best = NULL;
+    double bp = -INFINITY;
+    for (int i = 0; i < POOL; i++) {
+        cand *e = &f->pool[i];
+        if (!e->used || e->checked == f->t)
+            continue;
+        double pri = isnan(e->fine) ? 1.0 + e->coarse : e->fine + 0.01 * (double)(f->t - e->checked);
+        if (pri > bp)
+            bp = pri, best = e;
+    }
+    return best;
+}
+
+/* The entry to lock on, or NULL: good enough, confirmed, clearly ahead of
+ * every other place, after a whole sweep. */
+static cand *lock_choice(mar_follow *f)
+{
+    if (f->sweeps_done < 1)
+        return NULL;
+    cand *best = NULL;
+    for (int i = 0; i < POOL; i++) {
+        cand *e = &f->pool[i];
+        if (e->used && !isnan(e->fine) && (!best || e->fine > best->fine))
+            best = e;
+    }
+    if (!best || best->fine < f->opt.lock_threshold || best->confirmed < LOCK_CONFIRM
+        || best->kappa < KAPPA_LOCK
+        || usable(f, best->since, f->opt.lock_window) < f->opt.lock_window)
+        return NULL;
+    /* a short window proves less: the margin grows as 1/sqrt(frames) below verify_window */
+    double margin = f->opt.lock_margin * sqrt((double)f->opt.verify_window / (double)best->frames);
+    for (int i = 0; i < POOL; i++) {
+        cand *e = &f->pool[i];
+        if (!e->used || e == best || fabs(e->p - best->p) < DISTINCT)
+            continue;
+        if (isnan(e->fine)) {
+            if (e->coarse >= best->fine - COARSE_SLACK)
+                return NULL;                          /* a rival not looked at closely yet */
+        } else if (fisher(best->fine) - fisher(e->fine) < margin) {
+            return NULL;
+        }
+    }
+    return best;
+}
+
+/* --- one tick ----------------------------------------------------------- */
+
+/* The noise floor: the quietest frame of the last FLOOR_BLOCKS blocks. A
+ * long memory: in music the quietest moments are rare, and a floor that
+ * crept up to the music would make ordinary quiet frames look like a pause. */
+static void note_floor(mar_follow *f, double db)
+{
+    size_t b = (size_t)(f->floor_frames / FLOOR_BLOCK) % FLOOR_BLOCKS;
+    if (f->floor_frames % FLOOR_BLOCK == 0)
+        f->floor_min[b] = INFINITY;               /* a new block replaces the oldest */
+    f->floor_min[b] = fmin(f->floor_min[b], db);
+    f->floor_frames++;
+    double nf = INFINITY;
+    for (int k = 0; k < FLOOR_BLOCKS; k++)
+        nf = fmin(nf, f->floor_min[k]);
+    f->nf = nf;
+}
+
+static void take_frame(mar_follow *f, double live, uint32_t *flags, int *have)
+{
+    size_t slot = ring(f, f->t);
+    *have = 0;
+    f->lf[slot] = NAN;
+    f->ldb[slot] = NAN;
+    if (isnan(live)) {
+        *flags |= MAR_FOLLOW_F_NO_FRAME;
+        f->c.missing++;
+        return;
+    }
+    if (!isfinite(live) || live < 0.0) {
+        *flags |= MAR_FOLLOW_F_BAD_INPUT | MAR_FOLLOW_F_NO_FRAME;
+        f->c.bad_input++;
+        return;
+    }
+    double db = level_db(live);
+    f->ldb[slot] = db;
+    f->lf[slot] = feature(&f->lvl, &f->lvl_started, db, f->opt.range_db);
+    note_floor(f, db);
+    f->c.frames++;
+    *have = 1;
+}
+
+static double stored_db_at(const mar_follow *f, double x)
+{
+    long j = (long)floor(x);
+    if (j < -f->pad || j >= (long)f->n + f->pad)
+        return level_db(0.0);
+    return f->sdb[j];
+}
+
+/* Pause detection while following; returns 1 when the recorder stopped.
+ * Evidence only where the stored music says the live frame should stand
+ * clearly over the noise floor; there a frame is "low" if far below what
+ * is expected and "silent" if also near the floor. */
+static int detect_pause(mar_follow *f, int have)
+{
+    if (!have || !f->have_gain || !f->measured || f->state != MAR_FOLLOW_LOCKED)
+        return 0;                                     /* only when the position is trusted */
+    double db = f->ldb[ring(f, f->t)];
+    /* the stored frame this live frame should show: centre of the frame */
+    double stored = stored_db_at(f, f->p - 0.5 * f->r - 0.5);
+    double expected = stored + f->gain;
+    double margin = expected - f->nf;                 /* [dB] over the floor */
+    if (margin < AUDIBLE_DB || stored < f->s_level - MUSIC_RANGE_DB)
+        return 0;                                     /* the music is quiet here: no evidence */
+    if (db >= expected - fmin(LOW_DB, 0.5 * margin))
+        f->last_high = f->t;                          /* the music was there, as expected */
+    if (db < expected - fmin(LOW_DB, 0.5 * margin)) {
+        if (f->low_run == 0)
+            f->low_start = f->t;
+        f->low_run++;
+        /* silent: near the floor and steady (hiss), not a gap between notes */
+        double prev = f->ldb[ring(f, f->t - 1)];
+        int steady = !isnan(prev) && fabs(db - prev) <= STEADY_DB;
+        int deep = db < f->nf + fmin(NEAR_FLOOR_DB, 0.5 * margin) || db < expected - DEEP_DB;
+        f->silent_run = deep && steady ? f->silent_run + 1 : 0;
+    } else {
+        f->low_run = 0;
+        f->silent_run = 0;
+    }
+    return (double)f->silent_run >= f->opt.pause_after;
+}
+
+/* Live minus stored level [dB] on the line (p, r), over loud stored frames:
+ * from the last `ages` frames when starting, then smoothed frame by frame. */
+static void update_gain(mar_follow *f, double p, double r, size_t ages)
+{
+    ages = usable(f, f->seg_start, ages);
+    double sum = 0.0;
+    size_t cnt = 0;
+    for (size_t i = 0; i < ages; i++) {
+        double db = f->ldb[ring(f, f->t - i)];
+        double s = stored_db_at(f, p - r * ((double)i + 0.5) - 0.5);
+        if (!isnan(db) && s >= f->s_level - LOUD_DB)
+            sum += db - s, cnt++;
+    }
+    if (!cnt)
+        return;
+    if (!f->have_gain) {
+        f->gain = sum / (double)cnt;
+        f->have_gain = 1;
+    } else {
+        /* a frame far below is a dropout or a pause, not the volume knob; and
+         * the knob turns slowly: at most GAIN_STEP_DB per frame */
+        double diff = sum / (double)cnt - f->gain;
+        if (diff > -LOW_DB)
+            f->gain += fmax(-GAIN_STEP_DB, fmin(GAIN_STEP_DB, GAIN_ALPHA * diff));
+    }
+}
+
+static void kf_predict(mar_follow *f)
+{
+    double q_r = f->opt.rate_noise * f->opt.rate_noise;
+    /* F = [1 1; 0 1] */
+    double p00 = f->P00 + 2.0 * f->P01 + f->P11 + 1e-6;
+    double p01 = f->P01 + f->P11;
+    double p11 = f->P11 + q_r;
+    f->P00 = p00, f->P01 = p01, f->P11 = p11;
+    f->p += f->r;
+}
+
+/* Smooth tracking measurement; returns 1 if used, sets *quiet. The lags
+ * searched cover 3 sigma of the predicted measurement (3 ticks at least,
+ * WIDE_LAGS at most): wide after a resume, narrow while following. */
+static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
+{
+    size_t ages = usable(f, f->seg_start, f->opt.window);
+    *quiet = 0;
+    if (ages < f->opt.min_window)
+        return 0;
+    long j0;
+    double c;
+    size_t m = resample(f, f->p, f->r, ages, &j0, &c);
+    if (m < f->opt.min_window / 2)
+        return 0;
+    double hp0 = f->P00 - c * f->P01, hp1 = f->P01 - c * f->P11;     /* P H' with H = [1, -c] */
+    double var = hp0 - c * hp1;                                       /* H P H' [tick^2] */
+    double span = ceil(3.0 * sqrt(var > 0.0 ? var : 0.0));
+    int lags = span < TRACK_LAGS ? TRACK_LAGS : span > WIDE_LAGS ? WIDE_LAGS : (int)span;
+    double rho[2 * MAX_LAGS + 1], h, kappa;
+    int edge;
+    double spread = correlate(f, f->rs, 0, m, j0, lags, rho);
+    if (spread < f->opt.quiet_db) {
+        *quiet = 1;
+        return 0;
+    }
+    double d = peak(rho, lags, &h, &kappa, &edge);
+    if (edge || h < f->opt.track_threshold || !(kappa > 0.0))
+        return 0;
+    double k = kappa / KAPPA_REF;
+    double R = f->opt.meas_noise * f->opt.meas_noise / (k < 1.0 ? (k > 0.01 ? k : 0.01) : 1.0);
+    double S = var + R;
+    if (d * d > 9.0 * S + 1.0)                        /* gate: 3 sigma, and at least a tick */
+        return 0;
+    double k0 = hp0 / S, k1 = hp1 / S;
+    f->p += k0 * d;
+    f->r += k1 * d;
+    f->P00 -= k0 * hp0;
+    f->P01 -= k0 * hp1;
+    f->P11 -= k1 * hp1;
+    double qual = (h - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
+    f->conf += 0.05 * (qual - f->conf);
+    *flags |= MAR_FOLLOW_F_MEASURED;
+    return 1;
+}
+
+/* Paper tracking: this tick's stored sample is the next one (p + 1), or
+ * doubled (p) or one skipped (p + 2), whichever lag of -1, 0, +1 correlates
+ * best over the window; returns 1 if the correlation decided, sets *quiet
+ * and *step (0, 1, 2). */
+static int track_paper(mar_follow *f, int *quiet, int *step, uint32_t *flags)
+{
+    *quiet = 0;
+    *step = 1;
+    size_t ages = usable(f, f->seg_start, f->opt.paper_window);
+    if (ages < 8)
+        return 0;
+    long j0;
+    double c;
+    size_t m = resample(f, f->p + 1.0, 1.0, ages, &j0, &c);
+    if (m < 8)
+        return 0;
+    double rho[3];
+    double spread = correlate(f, f->rs, 0, m, j0, 1, rho);
+    if (spread < f->opt.quiet_db) {
+        *quiet = 1;
+        return 0;
+    }
+    int b = rho[0] > rho[1] && rho[0] >= rho[2] ? 0 : rho[2] > rho[1] ? 2 : 1;
+    if (rho[b] < f->opt.track_threshold)
+        return 0;
+    *step = b;                                        /* lag -1: double, 0: go on, +1: skip */
+    double qual = (rho[b] - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
+    f->conf += 0.05 * (qual - f->conf);
+    *flags |= MAR_FOLLOW_F_MEASURED;
+    return 1;
+}
+
+static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
+{
+    double old = f->p;
+    int was_following = f->ever && f->state != MAR_FOLLOW_SEARCHING;
+    f->p = e->p;
+    f->r = e->r;
+    if (f->opt.mode == MAR_FOLLOW_PAPER)
+        f->p = floor(f->p + 0.5), f->r = 1.0;
+    kf_init(f, 0.25, 1e-5);
+    f->seg_start = e->since;
+    f->state = MAR_FOLLOW_LOCKED;
+    f->ever = 1;
+    f->last_good = f->t;
+    f->bad_since = f->quiet_since = 0;
+    f->low_run = f->silent_run = 0;
+    f->conf = (e->fine - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
+    f->measured = 0;
+    f->have_gain = 0;
+    update_gain(f, f->p, f->r, f->opt.verify_window);
+    if (!was_following || fabs(old - f->p) > 2.0)
+        *flags |= MAR_FOLLOW_F_JUMP;
+    f->c.locks++;
+    stop_search(f);
+}
+
+static void run_search(mar_follow *f, uint32_t *flags)
+{
+    f->c.search_steps++;
+    *flags |= MAR_FOLLOW_F_SEARCH;
+    cand *tr = NULL;
+    for (int i = 0; i < POOL; i++) {                 /* candidates move with the music */
+        cand *e = &f->pool[i];
+        if (!e->used)
+            continue;
+        if (e->track)
+            tr = e;
+        else
+            e->p += e->r;
+    }
+    if (f->ever && f->state != MAR_FOLLOW_SEARCHING) {
+        /* the tracker's own hypothesis competes as the "track" entry */
+        if (!tr) {
+            for (int i = 0; i < POOL && !tr; i++)
+                if (!f->pool[i].used)
+                    tr = &f->pool[i];
+            if (!tr)
+                tr = &f->pool[0];
+            memset(tr, 0, sizeof *tr);
+            tr->used = 1;
+            tr->track = 1;
+            tr->fine = NAN;
+            tr->since = f->seg_start;
+            tr->checked = f->t;
+        }
+        tr->p = f->p;
+        tr->r = f->r > 0.0 ? f->r : 1.0;
+    } else if (tr) {
+        tr->used = 0;
+    }
+    prepare_search(f);
+    if (f->m_eff == 0)
+        return;
+    sweep(f);
+    cand *e = next_to_verify(f);
+    if (e)
+        verify(f, e);
+    dedup(f);
+    cand *best = lock_choice(f);
+    if (best)
+        lock_on(f, best, flags);
+}
+
+/* The recorder stopped: back to where the silence began, and hold there.
+ * It began after the last frame clearly over the noise floor, and (with a
+ * reverberant tail) no later than the first frame far below the stored
+ * music: the earlier of the two, plus half a frame. */
+static void pause_now(mar_follow *f)
+{
+    uint64_t first_low = f->low_start;
+    uint64_t oldest = f->t + 1 > f->hcap - 1 ? f->t + 2 - f->hcap : 0;
+    if (oldest < f->seg_start)
+        oldest = f->seg_start;
+    uint64_t last_loud = f->t;
+    while (last_loud > oldest) {
+        double db = f->ldb[ring(f, last_loud)];
+        if (!isnan(db) && db >= f->nf + NEAR_FLOOR_DB)
+            break;
+        last_loud--;
+    }
+    uint64_t stop = last_loud + 1 < first_low ? last_loud + 1 : first_low;   /* first silent step */
+    if (stop < f->last_high + 1)
+        stop = f->last_high + 1;                      /* it played as expected until then */
+    double at = f->p;
+    if (stop >= 1 && stop - 1 >= oldest && f->t - stop < f->hcap - 1)
+        at = f->lpos[ring(f, stop - 1)];
+    f->frozen = at + 0.5 * f->r;
+    f->p = f->frozen;
+    f->state = MAR_FOLLOW_PAUSED;
+    f->loud_run = 0;
+    f->pause_db = f->ldb[ring(f, f->t)];              /* a silent frame (detect_pause saw it) */
+    /* resume on frames halfway up from the silence to the music expected where it stopped */
+    double expected = -INFINITY;
+    for (int k = 0; k < 25; k++)
+        expected = fmax(expected, stored_db_at(f, f->frozen + (double)k));
+    double margin = expected + f->gain - f->pause_db;
+    f->resume_db = fmin(RESUME_DB, fmax(MIN_RESUME_DB, 0.5 * margin));
+    f->c.pauses++;
+    stop_search(f);
+}
+
+/* In a pause: two frames clearly over the level of the silence resume the
+ * tape where it stopped, from the middle of the first of them. */
+static int resume_now(mar_follow *f, int have, uint32_t *flags)
+{
+    double db = have ? f->ldb[ring(f, f->t)] : NAN;
+    if (have && db > f->pause_db + f->resume_db) {
+        f->loud_run++;
+    } else {
+        f->loud_run = 0;
+        if (have)                                     /* follow the silence's level */
+            f->pause_db += PAUSE_ALPHA * (db - f->pause_db);
+    }
+    if (f->loud_run < 2)
+        return 0;
+    if (f->opt.mode == MAR_FOLLOW_PAPER)
+        f->r = 1.0;
+    f->p = f->frozen + f->r * ((double)f->loud_run - 0.5);
+    f->seg_start = f->t + 1 - f->loud_run;
+    f->state = MAR_FOLLOW_HOLDING;
+    f->measured = 0;
+    f->last_good = f->t;
+    f->bad_since = f->quiet_since = 0;
+    f->low_run = f->silent_run = 0;
+    kf_init(f, RESUME_VAR, f->P11 + 1e-6);
+    f->c.resumes++;
+    *flags |= MAR_FOLLOW_F_JUMP;
+    return 1;
+}
+
+/* Following (LOCKED or HOLDING): one measurement, then the state. */
+static void follow(mar_follow *f, int have, uint32_t *flags)
+{
+    int quiet = 0, ok;
+    if (f->opt.mode == MAR_FOLLOW_PAPER) {
+        int step;
+        ok = track_paper(f, &quiet, &step, flags);
+        f->p += (double)step;
+        f->r = (double)step;
+    } else {
+        ok = track_smooth(f, &quiet, flags);
+    }
+    if (ok) {
+        f->measured = 1;
+        f->c.measurements++;
+        f->last_good = f->t;
+        f->bad_since = f->quiet_since = 0;
+        update_gain(f, f->p, f->r > 0.0 ? f->r : 1.0, 1);
+    } else if (quiet || !have) {
+        f->quiet_since++;
+        f->conf *= 0.99;
+    } else {
+        f->c.rejected++;
+        f->bad_since++;
+        f->conf *= 0.97;
+    }
+    if (quiet)
+        *flags |= MAR_FOLLOW_F_QUIET;
+    double since = (double)(f->t - f->last_good);
+    /* LOCKED: a measurement confirmed the place since the last (re)start, recently */
+    f->state = since <= f->opt.hold_after && f->measured ? MAR_FOLLOW_LOCKED : MAR_FOLLOW_HOLDING;
+    /* frames from well before the measurements went bad may belong to
+     * another place of the tape (a jump): the search starts after them */
+    uint64_t bad_start = f->t + 1 - f->bad_since;
+    uint64_t from = bad_start > f->opt.min_window ? bad_start - f->opt.min_window : 0;
+    if ((double)f->bad_since >= f->opt.lost_after || since >= f->opt.quiet_lost_after) {
+        f->state = MAR_FOLLOW_SEARCHING;
+        stop_search(f);
+        start_search(f, from);
+    } else if ((double)f->bad_since >= f->opt.search_after) {
+        start_search(f, from);
+    } else if (ok && f->searching) {
+        stop_search(f);
+    }
+}
+
+void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
+{
+    uint32_t flags = 0;
+    int have;
+    f->c.steps++;
+    take_frame(f, live, &flags, &have);
+
+    /* 1. the clock: where the music is now, before this frame is looked at */
+    int resumed = 0;
+    if (f->state == MAR_FOLLOW_PAUSED)
+        resumed = resume_now(f, have, &flags);
+    else if (f->state == MAR_FOLLOW_SEARCHING)
+        f->p += f->ever ? f->r : 0.0;                 /* flywheel, or nothing known yet */
+    else if (f->opt.mode == MAR_FOLLOW_PAPER)
+        ;                                             /* paper: the tracking step moves it */
+    else
+        kf_predict(f);
+
+    /* 2. following: pause, else measure */
+    if (f->state == MAR_FOLLOW_LOCKED || f->state == MAR_FOLLOW_HOLDING) {
+        if (!resumed && detect_pause(f, have))
+            pause_now(f);
+        else if (!resumed || f->opt.mode == MAR_FOLLOW_SMOOTH)
+            follow(f, have, &flags);
+    }
+
+    /* 3. the search, when not locked or in doubt */
+    if (f->searching)
+        run_search(f, &flags);
+    if (f->state == MAR_FOLLOW_SEARCHING) {
+        f->conf = 0.0;
+        if (!f->ever)
+            f->r = 0.0;
+    }
+
+    /* 4. limits */
+    if (f->opt.mode == MAR_FOLLOW_SMOOTH && f->state != MAR_FOLLOW_PAUSED && f->ever) {
+        if (f->r < f->opt.rate_min)
+            f->r = f->opt.rate_min, flags |= MAR_FOLLOW_F_RATE_LIMIT;
+        if (f->r > f->opt.rate_max)
+            f->r = f->opt.rate_max, flags |= MAR_FOLLOW_F_RATE_LIMIT;
+    }
+    if (f->p < 0.0)
+        f->p = 0.0;
+    if (f->p >= (double)f->n) {
+        f->p = (double)f->n;
+        flags |= MAR_FOLLOW_F_END;
+    }
+    f->lpos[ring(f, f->t)] = f->p;
+
+    double rate = f->state == MAR_FOLLOW_PAUSED ? 0.0 : f->r;
+    double ahead = f->p + rate * f->opt.delay;
+    out->position = ahead > (double)f->n ? (double)f->n : ahead;
+    out->rate = rate;
+    out->confidence = f->conf < 0.0 ? 0.0 : f->conf > 1.0 ? 1.0 : f->conf;
+    out->state = f->state;
+    out->flags = flags;
+    f->t++;
+}
+
+void mar_follow_get_counters(const mar_follow *f, mar_follow_counters *c) { *c = f->c; }
+
+size_t mar_follow_stored_length(const mar_follow *f) { return f->n; }

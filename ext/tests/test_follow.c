@@ -1,0 +1,212 @@
+/* Standalone C test of the music follower (mar_follow.c). Built by
+ * tests/test_follow.py with -Wall -Wextra -Wpedantic -Werror under
+ * AddressSanitizer and UBSan, and linked with --wrap=malloc (and calloc,
+ * realloc, free) to prove that no step allocates. */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "mar_follow.h"
+
+/* --- allocation counter (link with -Wl,--wrap=malloc,...) --- */
+static long allocations;
+void *__real_malloc(size_t n);
+void *__real_calloc(size_t n, size_t m);
+void *__real_realloc(void *p, size_t n);
+void __real_free(void *p);
+void *__wrap_malloc(size_t n) { allocations++; return __real_malloc(n); }
+void *__wrap_calloc(size_t n, size_t m) { allocations++; return __real_calloc(n, m); }
+void *__wrap_realloc(void *p, size_t n) { allocations++; return __real_realloc(p, n); }
+void __wrap_free(void *p) { if (p) allocations++; __real_free(p); }
+
+static int failures;
+#define CHECK(cond, ...)                                               \
+    do {                                                               \
+        if (!(cond)) {                                                 \
+            failures++;                                                \
+            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__);       \
+            fprintf(stderr, __VA_ARGS__);                              \
+            fputc('\n', stderr);                                       \
+        }                                                              \
+    } while (0)
+
+/* xorshift64*: a fixed-seed generator, same numbers on every machine */
+static uint64_t rng_state = 20261122u;
+static double uniform(double lo, double hi)
+{
+    rng_state ^= rng_state >> 12;
+    rng_state ^= rng_state << 25;
+    rng_state ^= rng_state >> 27;
+    uint64_t x = rng_state * UINT64_C(2685821657736338717);
+    return lo + (hi - lo) * (double)(x >> 11) / 9007199254740992.0;
+}
+
+/* A loudness curve with beats and phrases: linear, >= 0. */
+static void music(double *x, size_t n, double seed)
+{
+    for (size_t i = 0; i < n; i++) {
+        double t = (double)i * 0.02;                              /* [s] */
+        double beat = fmod(t * 2.1 + seed, 1.0);                  /* about 126 bpm */
+        double phrase = 0.5 + 0.4 * sin(0.37 * t + seed) * sin(0.11 * t + 2.0 * seed);
+        x[i] = phrase * (0.05 + exp(-beat * 9.0)) * (1.0 + 0.3 * uniform(-1.0, 1.0));
+    }
+}
+
+/* Live frames of the stored music played at rate from start [stored ticks]. */
+static double live_at(const double *s, size_t n, double start, double rate, size_t k)
+{
+    double x = start + rate * ((double)k + 0.5) - 0.5;           /* stored frame at this frame's centre */
+    if (x < 0.0 || x >= (double)(n - 1))
+        return 0.0;
+    size_t j = (size_t)x;
+    double fr = x - (double)j;
+    return s[j] + fr * (s[j + 1] - s[j]);
+}
+
+static void test_bad_options(void)
+{
+    double stored[100];
+    for (int i = 0; i < 100; i++)
+        stored[i] = 0.1 + 0.05 * (double)(i % 7);
+    mar_follow_options o;
+    int status = 0;
+    mar_follow_default_options(&o);
+    mar_follow *f = mar_follow_create(&o, stored, 100, &status);
+    CHECK(f && status == 0, "defaults refused: %d", status);
+    mar_follow_destroy(f);
+
+    struct { const char *what; mar_follow_options o; } bad[12];
+    int nb = 0;
+    for (int i = 0; i < 12; i++)
+        mar_follow_default_options(&bad[i].o);
+    bad[nb].what = "mode"; bad[nb++].o.mode = 7;
+    bad[nb].what = "rate_min > 1"; bad[nb++].o.rate_min = 1.5;
+    bad[nb].what = "rate_max < 1"; bad[nb++].o.rate_max = 0.5;
+    bad[nb].what = "rate NaN"; bad[nb++].o.rate_min = NAN;
+    bad[nb].what = "window < min"; bad[nb++].o.window = 3;
+    bad[nb].what = "coarse 0"; bad[nb++].o.coarse = 0;
+    bad[nb].what = "budget 0"; bad[nb++].o.search_budget = 0;
+    bad[nb].what = "threshold"; bad[nb++].o.lock_threshold = 1.5;
+    bad[nb].what = "pause_after"; bad[nb++].o.pause_after = 0.0;
+    bad[nb].what = "delay inf"; bad[nb++].o.delay = INFINITY;
+    bad[nb].what = "rate grid"; bad[nb++].o.rate_step = 1e-4;
+    bad[nb].what = "lock window"; bad[nb++].o.lock_window = 100000;
+    for (int i = 0; i < nb; i++) {
+        status = 0;
+        f = mar_follow_create(&bad[i].o, stored, 100, &status);
+        CHECK(!f && status < 0, "bad option %s accepted", bad[i].what);
+        mar_follow_destroy(f);
+    }
+    double with_nan[4] = {0.1, NAN, 0.2, 0.3}, negative[4] = {0.1, -0.1, 0.2, 0.3};
+    status = 0;
+    CHECK(!mar_follow_create(&o, with_nan, 4, &status) && status < 0, "NaN stored accepted");
+    status = 0;
+    CHECK(!mar_follow_create(&o, negative, 4, &status) && status < 0, "negative stored accepted");
+    status = 0;
+    CHECK(!mar_follow_create(&o, stored, 1, &status) && status < 0, "one stored frame accepted");
+}
+
+/* Random stored music, random live input (music, silence, noise, NaN,
+ * negative, infinite): every output sane, no step allocates. */
+static void test_random_inputs(int cases)
+{
+    enum { N = 3000, STEPS = 2500 };
+    static double stored[N];
+    for (int c = 0; c < cases; c++) {
+        music(stored, N, (double)c);
+        mar_follow_options o;
+        mar_follow_default_options(&o);
+        o.mode = c % 3 == 2 ? MAR_FOLLOW_PAPER : MAR_FOLLOW_SMOOTH;
+        o.search_budget = (size_t)uniform(1.0, 2000.0);
+        o.delay = uniform(0.0, 3.0);
+        int status = 0;
+        mar_follow *f = mar_follow_create(&o, stored, N, &status);
+        CHECK(f, "create failed: %d", status);
+        if (!f)
+            continue;
+        if (c % 2)
+            mar_follow_reset(f, uniform(-100.0, (double)N + 100.0));
+        double start = uniform(0.0, 1500.0), rate = uniform(0.92, 1.08);
+        long before = allocations;
+        uint64_t bad = 0;
+        for (size_t k = 0; k < STEPS; k++) {
+            double u = uniform(0.0, 1.0), live;
+            if (u < 0.02)
+                live = NAN;
+            else if (u < 0.03)
+                live = -uniform(0.0, 1.0), bad++;
+            else if (u < 0.04)
+                live = u < 0.035 ? INFINITY : -INFINITY, bad++;
+            else if (k > 1200 && k < 1400)
+                live = c % 2 ? 0.0 : 1e-3 * uniform(0.5, 1.0);     /* silence or hiss */
+            else
+                live = live_at(stored, N, start, rate, k) * (k > 1800 ? 10.0 : 1.0);
+            mar_follow_out out;
+            mar_follow_step(f, live, &out);
+            CHECK(isfinite(out.position) && out.position >= 0.0 && out.position <= (double)N,
+                  "case %d step %zu: position %g", c, k, out.position);
+            CHECK(isfinite(out.rate) && out.rate >= 0.0 && out.rate <= 2.0, "case %d step %zu: rate %g", c,
+                  k, out.rate);
+            CHECK(out.confidence >= 0.0 && out.confidence <= 1.0, "confidence %g", out.confidence);
+            CHECK(out.state >= MAR_FOLLOW_SEARCHING && out.state <= MAR_FOLLOW_PAUSED, "state %d", out.state);
+            if (o.mode == MAR_FOLLOW_PAPER && out.state != MAR_FOLLOW_SEARCHING)
+                CHECK(out.rate == 0.0 || out.rate == 1.0 || out.rate == 2.0, "paper rate %g", out.rate);
+            if (!isfinite(live) || live < 0.0)
+                CHECK(out.flags & MAR_FOLLOW_F_NO_FRAME, "missing frame not flagged");
+            if (isfinite(live) && live < 0.0)
+                CHECK(out.flags & MAR_FOLLOW_F_BAD_INPUT, "negative frame not flagged");
+        }
+        CHECK(allocations == before, "case %d: steps allocated %ld times", c, allocations - before);
+        mar_follow_counters cnt;
+        mar_follow_get_counters(f, &cnt);
+        CHECK(cnt.steps == STEPS && cnt.bad_input == bad, "counters: steps %llu bad %llu (expected %llu)",
+              (unsigned long long)cnt.steps, (unsigned long long)cnt.bad_input, (unsigned long long)bad);
+        CHECK(mar_follow_stored_length(f) == N, "stored length");
+        mar_follow_destroy(f);
+    }
+}
+
+/* A known speed: locks and follows to a fraction of a tick. */
+static void test_follows(void)
+{
+    enum { N = 6000, STEPS = 3000 };
+    static double stored[N];
+    music(stored, N, 3.0);
+    mar_follow_options o;
+    mar_follow_default_options(&o);
+    int status = 0;
+    mar_follow *f = mar_follow_create(&o, stored, N, &status);
+    CHECK(f, "create failed: %d", status);
+    if (!f)
+        return;
+    const double start = 1234.0, rate = 1.03;
+    double worst = 0.0;
+    int locked = 0;
+    for (size_t k = 0; k < STEPS; k++) {
+        mar_follow_out out;
+        mar_follow_step(f, live_at(stored, N, start, rate, k), &out);
+        double truth = start + rate * (double)(k + 1);      /* end of frame k */
+        if (out.state == MAR_FOLLOW_LOCKED && !locked)
+            locked = (int)k + 1;
+        if (k > 1000)
+            worst = fmax(worst, fabs(out.position - truth));
+    }
+    CHECK(locked > 0 && locked < 500, "locked at step %d", locked);
+    CHECK(worst < 1.0, "position error up to %g ticks", worst);
+    mar_follow_destroy(f);
+}
+
+int main(void)
+{
+    test_bad_options();
+    test_random_inputs(12);
+    test_follows();
+    if (failures) {
+        fprintf(stderr, "%d checks failed\n", failures);
+        return 1;
+    }
+    printf("C follower tests passed\n");
+    return 0;
+}

@@ -1,0 +1,47 @@
+#include "mar_cobs.h"
+
+size_t mar_cobs_encode(const uint8_t *in, size_t n, uint8_t *out)
+{
+    size_t code_at = 0, o = 1;   /* where the pending code byte goes; next output */
+    uint8_t code = 1;            /* 1 + data bytes in the current block */
+    for (size_t i = 0; i < n; i++) {
+        if (in[i] != 0) {
+            out[o++] = in[i];
+            code++;
+        }
+        if (in[i] == 0 || code == 0xFF) {
+            out[code_at] = code;
+            code_at = o++;
+            code = 1;
+        }
+    }
+    out[code_at] = code;
+    return o;
+}
+
+long mar_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap)
+{
+    size_t i = 0, o = 0;
+    while (i < n) {
+        uint8_t code = in[i++];
+        if (code == 0)
+            return -1;
+        size_t run = (size_t)code - 1;
+        if (run > n - i)
+            return -1;
+        if (run > cap - o)
+            return -2;
+        for (size_t k = 0; k < run; k++) {
+            if (in[i] == 0)
+                return -1;
+            out[o++] = in[i++];
+        }
+        /* a block shorter than 254 bytes stands for a 0x00, except the last */
+        if (code != 0xFF && i < n) {
+            if (o == cap)
+                return -2;
+            out[o++] = 0;
+        }
+    }
+    return (long)o;
+}

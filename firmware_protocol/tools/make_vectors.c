@@ -1,0 +1,293 @@
+/* Writes the golden vectors of protocol version 1: every message type, as
+ * serial frames (vectors/serial.json) and as CAN frames (vectors/can.json).
+ *
+ *   gcc -std=c11 -I firmware_protocol firmware_protocol/mar_*.c \
+ *       firmware_protocol/tools/make_vectors.c -o make_vectors
+ *   ./make_vectors firmware_protocol/vectors
+ *
+ * Messages are written with the wire's field names (seq, not tick); CAN
+ * vectors list the frames of the message ("frames", after the "prefix"
+ * frames a receiver must have seen, e.g. the SYNC before setpoint PDOs) and
+ * what a fresh receiver decodes from prefix + frames ("decoded").
+ * tests/test_protocol.py checks the Python API against these files, and
+ * that they equal what this program writes now. */
+#include <stdio.h>
+#include <string.h>
+
+#include "mar_proto.h"
+#include "mar_proto_can.h"
+
+static const char *type_name(uint8_t t)
+{
+    switch (t) {
+    case MAR_MSG_SYNC: return "SYNC";
+    case MAR_MSG_SETPOINT: return "SETPOINT";
+    case MAR_MSG_ESTOP: return "ESTOP";
+    case MAR_MSG_ESTOP_RELEASE: return "ESTOP_RELEASE";
+    case MAR_MSG_CONFIG: return "CONFIG";
+    case MAR_MSG_STATUS: return "STATUS";
+    case MAR_MSG_HEARTBEAT: return "HEARTBEAT";
+    case MAR_MSG_LOUDNESS: return "LOUDNESS";
+    case MAR_MSG_NACK: return "NACK";
+    default: return "?";
+    }
+}
+
+static void hex(FILE *f, const uint8_t *p, size_t n)
+{
+    fputc('"', f);
+    for (size_t i = 0; i < n; i++)
+        fprintf(f, "%02x", p[i]);
+    fputc('"', f);
+}
+
+static void message(FILE *f, const mar_msg *m)
+{
+    fprintf(f, "{\"type\": \"%s\", \"node\": %u, \"seq\": %lu", type_name(m->type), m->node,
+            (unsigned long)m->seq);
+    switch (m->type) {
+    case MAR_MSG_SYNC:
+        fprintf(f, ", \"poll\": %u", m->sync.poll);
+        break;
+    case MAR_MSG_SETPOINT:
+        fprintf(f, ", \"entries\": [");
+        for (size_t i = 0; i < m->setpoint.n; i++)
+            fprintf(f, "%s[%u, %u, %ld]", i ? ", " : "", m->setpoint.entry[i].node,
+                    m->setpoint.entry[i].channel, (long)m->setpoint.entry[i].counts);
+        fputc(']', f);
+        break;
+    case MAR_MSG_CONFIG:
+        fprintf(f, ", \"tick_period_us\": %lu, \"watchdog_ticks\": %u, \"channels\": [",
+                (unsigned long)m->config.tick_period_us, m->config.watchdog_ticks);
+        for (size_t i = 0; i < m->config.n; i++) {
+            const mar_channel_config *c = &m->config.channel[i];
+            fprintf(f, "%s[%u, %ld, %ld, %lu, %lu]", i ? ", " : "", c->channel, (long)c->min_counts,
+                    (long)c->max_counts, (unsigned long)c->max_speed, (unsigned long)c->max_accel);
+        }
+        fputc(']', f);
+        break;
+    case MAR_MSG_STATUS:
+        fprintf(f, ", \"flags\": %u, \"state\": %u, \"rejected\": %u, \"seq_gaps\": %u, \"positions\": [",
+                m->status.flags, m->status.state, m->status.rejected, m->status.seq_gaps);
+        for (size_t i = 0; i < m->status.n; i++)
+            fprintf(f, "%s%ld", i ? ", " : "", (long)m->status.position[i]);
+        fputc(']', f);
+        break;
+    case MAR_MSG_HEARTBEAT:
+        fprintf(f, ", \"state\": %u", m->heartbeat.state);
+        break;
+    case MAR_MSG_LOUDNESS:
+        fprintf(f, ", \"value\": %.9g", (double)m->loudness.value);
+        break;
+    case MAR_MSG_NACK:
+        fprintf(f, ", \"reason\": %u, \"flags\": %u, \"ref_type\": %u, \"ref_seq\": %lu", m->nack.reason,
+                m->nack.flags, m->nack.ref_type, (unsigned long)m->nack.ref_seq);
+        break;
+    default:
+        break;
+    }
+    fputc('}', f);
+}
+
+static mar_msg msg(uint8_t type, uint8_t node, uint32_t seq)
+{
+    mar_msg m;
+    memset(&m, 0, sizeof m);
+    m.type = type;
+    m.node = node;
+    m.seq = seq;
+    return m;
+}
+
+/* The vectors' messages; returns how many (at most cap). */
+static size_t messages(mar_msg *out, const char **names)
+{
+    size_t n = 0;
+    mar_msg m;
+
+    m = msg(MAR_MSG_SYNC, MAR_BROADCAST, 0x01020304u);
+    m.sync.poll = MAR_BROADCAST;
+    names[n] = "sync_every_node", out[n++] = m;
+    m = msg(MAR_MSG_SYNC, MAR_BROADCAST, 0);
+    m.sync.poll = 3;
+    names[n] = "sync_poll_node_3", out[n++] = m;
+
+    /* the bundled figure (marionette/data/hoffmann1996.toml) at its home pose */
+    static const struct { uint8_t node, channel; int32_t counts; } home[16] = {
+        { 1, 0, 12000 }, { 1, 1, 12000 }, { 1, 2, 12000 }, { 1, 3, 12000 }, { 1, 4, 12000 },
+        { 1, 5, 12000 }, { 1, 6, 12000 }, { 1, 7, 12000 }, { 1, 8, 12000 }, { 2, 0, 0 },
+        { 3, 0, 0 }, { 4, 0, 0 }, { 5, 0, 2048 }, { 5, 1, 2048 }, { 5, 2, 2048 }, { 5, 3, 2048 } };
+    m = msg(MAR_MSG_SETPOINT, MAR_BROADCAST, 1234);
+    for (size_t i = 0; i < 16; i++)
+        m.setpoint.entry[i] = (mar_setpoint_entry){ home[i].node, home[i].channel, home[i].counts };
+    m.setpoint.n = 16;
+    names[n] = "setpoints_hoffmann_home", out[n++] = m;
+
+    m = msg(MAR_MSG_SETPOINT, MAR_BROADCAST, 0xFFFFFFFFu);
+    m.setpoint.entry[0] = (mar_setpoint_entry){ 0, 0, INT32_MIN };
+    m.setpoint.entry[1] = (mar_setpoint_entry){ 0, 1, INT32_MAX };
+    m.setpoint.entry[2] = (mar_setpoint_entry){ 254, 255, -1 };
+    m.setpoint.entry[3] = (mar_setpoint_entry){ 7, 3, 0 };
+    m.setpoint.n = 4;
+    names[n] = "setpoints_extremes", out[n++] = m;
+
+    /* 60 channels of one node, no zero byte: a body of 254 bytes whose
+     * COBS encoding needs a full 0xFF block */
+    m = msg(MAR_MSG_SETPOINT, MAR_BROADCAST, 0x11111111u);
+    for (int i = 0; i < MAR_SETPOINT_MAX; i++)
+        m.setpoint.entry[i] = (mar_setpoint_entry){ 9, (uint8_t)(1 + i), 0x01010101 * (1 + i % 100) };
+    m.setpoint.n = MAR_SETPOINT_MAX;
+    names[n] = "setpoints_60_channels", out[n++] = m;
+
+    names[n] = "estop_every_node", out[n++] = msg(MAR_MSG_ESTOP, MAR_BROADCAST, 1);
+    names[n] = "estop_node_3", out[n++] = msg(MAR_MSG_ESTOP, 3, 2);
+    names[n] = "estop_release_every_node", out[n++] = msg(MAR_MSG_ESTOP_RELEASE, MAR_BROADCAST, 3);
+
+    m = msg(MAR_MSG_CONFIG, 5, 42);
+    m.config.tick_period_us = 20000;
+    m.config.watchdog_ticks = 5;
+    m.config.channel[0] = (mar_channel_config){ 0, -3952, 8048, 8000, 40000 };
+    m.config.channel[1] = (mar_channel_config){ 1, -1952, 3248, 8000, 40000 };
+    m.config.n = 2;
+    names[n] = "config_node_5", out[n++] = m;
+
+    m = msg(MAR_MSG_STATUS, 1, 1234);
+    m.status.flags = MAR_FLAG_LIMIT | MAR_FLAG_WATCHDOG;
+    m.status.state = MAR_STATE_OPERATIONAL;
+    m.status.rejected = 3;
+    m.status.seq_gaps = 65535;
+    for (int i = 0; i < 9; i++)
+        m.status.position[i] = 12000 - 1000 * i;
+    m.status.n = 9;
+    names[n] = "status_node_1", out[n++] = m;
+
+    m = msg(MAR_MSG_STATUS, 4, 7);
+    m.status.state = MAR_STATE_STOPPED;
+    m.status.flags = MAR_FLAG_ESTOP | MAR_FLAG_FAULT | MAR_FLAG_FOLLOWING;
+    m.status.position[0] = -37500;
+    m.status.n = 1;
+    names[n] = "status_estop", out[n++] = m;
+
+    m = msg(MAR_MSG_HEARTBEAT, 2, 0);
+    m.heartbeat.state = MAR_STATE_BOOT;
+    names[n] = "heartbeat_boot", out[n++] = m;
+    m = msg(MAR_MSG_HEARTBEAT, 1, 0);
+    m.heartbeat.state = MAR_STATE_PRE_OPERATIONAL;
+    names[n] = "heartbeat_pre_operational", out[n++] = m;
+
+    m = msg(MAR_MSG_LOUDNESS, 6, 1000);
+    m.loudness.value = 0.5f;
+    names[n] = "loudness", out[n++] = m;
+    m = msg(MAR_MSG_LOUDNESS, 6, 1001);
+    m.loudness.value = 0.0f;
+    names[n] = "loudness_silence", out[n++] = m;
+
+    m = msg(MAR_MSG_NACK, 5, 0);
+    m.nack.reason = MAR_REASON_BAD_CONFIG;
+    m.nack.flags = 0;
+    m.nack.ref_type = MAR_MSG_CONFIG;
+    m.nack.ref_seq = 42;
+    names[n] = "nack_bad_config", out[n++] = m;
+    m = msg(MAR_MSG_NACK, 5, 0);
+    m.nack.reason = MAR_REASON_ACCEPTED;
+    m.nack.ref_type = MAR_MSG_CONFIG;
+    m.nack.ref_seq = 43;
+    names[n] = "nack_accepted", out[n++] = m;
+    return n;
+}
+
+static int write_serial(FILE *f, const mar_msg *ms, const char **names, size_t n)
+{
+    fprintf(f, "[\n");
+    for (size_t i = 0; i < n; i++) {
+        uint8_t body[MAR_FRAME_MAX], wire[MAR_WIRE_MAX];
+        long b = mar_encode_body(&ms[i], body, sizeof body);
+        long w = mar_encode_frame(&ms[i], wire, sizeof wire);
+        if (b < 0 || w < 0) {
+            fprintf(stderr, "%s: encoding failed (%ld, %ld)\n", names[i], b, w);
+            return 1;
+        }
+        fprintf(f, "  {\"name\": \"%s\",\n   \"message\": ", names[i]);
+        message(f, &ms[i]);
+        fprintf(f, ",\n   \"body\": ");
+        hex(f, body, (size_t)b);
+        fprintf(f, ",\n   \"wire\": ");
+        hex(f, wire, (size_t)w);
+        fprintf(f, "}%s\n", i + 1 < n ? "," : "");
+    }
+    fprintf(f, "]\n");
+    return 0;
+}
+
+static void frames(FILE *f, const mar_can_frame *fr, size_t n)
+{
+    fputc('[', f);
+    for (size_t i = 0; i < n; i++) {
+        fprintf(f, "%s[%u, ", i ? ", " : "", fr[i].id);
+        hex(f, fr[i].data, fr[i].dlc);
+        fputc(']', f);
+    }
+    fputc(']', f);
+}
+
+static int write_can(FILE *f, const mar_msg *ms, const char **names, size_t n)
+{
+    static mar_can_rx rx;
+    fprintf(f, "[\n");
+    int first = 1;
+    for (size_t i = 0; i < n; i++) {
+        mar_can_frame fr[MAR_CAN_FRAMES_MAX], prefix[1];
+        size_t np = 0;
+        long k = mar_can_encode(&ms[i], fr, MAR_CAN_FRAMES_MAX);
+        if (k == MAR_E_VALUE || k == MAR_E_RANGE)
+            continue;           /* not carried on CAN (poll, node 0 or 254, channel 255, int32 extremes) */
+        if (k < 0) {
+            fprintf(stderr, "%s: CAN encoding failed (%ld)\n", names[i], k);
+            return 1;
+        }
+        if (ms[i].type == MAR_MSG_SETPOINT)
+            prefix[np++] = (mar_can_frame){ MAR_CAN_SYNC, 1, { (uint8_t)ms[i].seq, 0, 0, 0, 0, 0, 0, 0 } };
+        fprintf(f, "%s  {\"name\": \"%s\",\n   \"message\": ", first ? "" : ",\n", names[i]);
+        first = 0;
+        message(f, &ms[i]);
+        fprintf(f, ",\n   \"prefix\": ");
+        frames(f, prefix, np);
+        fprintf(f, ",\n   \"frames\": ");
+        frames(f, fr, (size_t)k);
+        fprintf(f, ",\n   \"decoded\": [");
+        mar_can_rx_init(&rx);
+        int count = 0;
+        for (size_t j = 0; j < np + (size_t)k; j++) {
+            mar_msg out;
+            if (mar_can_rx_feed(&rx, j < np ? &prefix[j] : &fr[j - np], &out) == 1 && j >= np) {
+                fprintf(f, "%s", count++ ? ",\n               " : "");
+                message(f, &out);
+            }
+        }
+        fprintf(f, "]}");
+    }
+    fprintf(f, "\n]\n");
+    return 0;
+}
+
+int main(int argc, char **argv)
+{
+    static mar_msg ms[32];
+    const char *names[32];
+    size_t n = messages(ms, names);
+    const char *dir = argc > 1 ? argv[1] : ".";
+    char path[4096];
+    snprintf(path, sizeof path, "%s/serial.json", dir);
+    FILE *f = fopen(path, "w");
+    if (!f || write_serial(f, ms, names, n) || fclose(f)) {
+        perror(path);
+        return 1;
+    }
+    snprintf(path, sizeof path, "%s/can.json", dir);
+    f = fopen(path, "w");
+    if (!f || write_can(f, ms, names, n) || fclose(f)) {
+        perror(path);
+        return 1;
+    }
+    return 0;
+}

@@ -1,0 +1,63 @@
+"""`marionette sim`: simulated servo nodes in their own process, behind a
+real serial line (a pty) or CAN bus (slcan on a pty, or udp_multicast)."""
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+from marionette.config import load_config
+
+
+def register(sub) -> None:
+    p = sub.add_parser("sim", help="run simulated servo nodes behind a pty or CAN bus")
+    p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--serial", action="store_true", help="serial protocol on a pty (default)")
+    where.add_argument("--can", choices=("slcan", "udp_multicast"),
+                       help="CAN: an slcan adapter emulated on a pty, or python-can's udp_multicast")
+    p.add_argument("--channel", default="239.74.163.2",
+                   help="udp_multicast group address (with --can udp_multicast)")
+    p.add_argument("--seconds", type=float, help="stop after this long [s] (default: until 'quit')")
+    p.add_argument("--watchdog-ticks", type=int, default=None,
+                   help="ticks without a setpoint before a node stops (default: SPEC.md's)")
+    p.add_argument("--drop", type=float, default=0.0, help="probability a received byte is lost")
+    p.add_argument("--corrupt", type=float, default=0.0, help="probability a received byte is corrupted")
+    p.add_argument("--delay", type=float, default=0.0, help="extra delay before a node acts [s]")
+    p.add_argument("--noise", type=float, default=0.0, help="reported position noise [counts, std dev]")
+    p.add_argument("--silent", type=int, nargs="*", default=[], help="nodes that do not answer")
+    p.add_argument("--seed", type=int, default=0, help="seed of the fault injection")
+    p.add_argument("--trace", help="write the simulated positions at each SYNC to this .npz")
+    p.add_argument("--priority", type=int, default=0,
+                   help="run at this SCHED_FIFO priority when permitted (0: normal), so the "
+                        "simulated nodes keep time on a busy machine")
+    p.set_defaults(run=cmd_sim)
+
+
+def cmd_sim(args) -> int:
+    from marionette.sim.faults import Faults
+    from marionette.sim.figure import SimFigure
+    from marionette.sim.node import DEFAULT_WATCHDOG_TICKS
+    from marionette.sim.server import SerialFrontEnd, SlcanFrontEnd, UdpFrontEnd, run
+
+    config = load_config(args.config)
+    if args.priority:
+        try:
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
+        except (OSError, ValueError) as exc:
+            print(f"marionette sim: runs without SCHED_FIFO priority {args.priority}: {exc}",
+                  file=sys.stderr)
+    faults = Faults(drop_rate=args.drop, corrupt_rate=args.corrupt, delay=args.delay,
+                    position_noise=args.noise, silent=set(args.silent), seed=args.seed)
+    figure = SimFigure(config, faults, args.watchdog_ticks or DEFAULT_WATCHDOG_TICKS,
+                       trace=bool(args.trace))
+    if args.can == "slcan":
+        front = SlcanFrontEnd()
+    elif args.can == "udp_multicast":
+        front = UdpFrontEnd(args.channel)
+    else:
+        front = SerialFrontEnd()
+    summary = run(figure, front, faults, seconds=args.seconds, trace_path=args.trace,
+                  control=sys.stdin)
+    print(json.dumps({"summary": summary}), flush=True)
+    return 0

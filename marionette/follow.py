@@ -1,0 +1,163 @@
+"""Music following from Python: the C follower (ext/mar_follow.c) over a
+stored loudness, fed live loudness frames one per tick.
+
+    from marionette.follow import Follower
+    f = Follower(show.loudness, config.follow, period=config.tick_period)
+    track = f.run(live_frames)          # arrays, one entry per tick
+    out = f.step(frame)                 # one tick (NaN: no frame this tick)
+
+Positions are in stored ticks (show ticks): ``position * period`` is the
+taught music time [s] that the live music has reached at that tick. Rates
+are stored ticks per tick (1.0: the live music plays as fast as taught).
+docs/music.md describes the algorithm and the options.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from marionette import _follow
+from marionette.config import FollowConfig
+from marionette.errors import MarionetteError
+
+STATES = _follow.STATES         # state code -> name: searching, locked, holding, paused
+FLAGS = _follow.FLAGS           # flag name -> bit
+MAX_RATES = 64                  # the C search's rate grid limit
+
+
+class FollowError(MarionetteError, ValueError):
+    """The follower refused its options or the stored loudness."""
+
+
+@dataclass(frozen=True)
+class FollowOut:
+    """One tick's answer."""
+
+    position: float             # [stored ticks]
+    rate: float                 # [stored ticks per tick]
+    confidence: float           # [0, 1]
+    state: str                  # one of STATES
+    flags: int                  # FLAGS bits
+
+
+@dataclass
+class Track:
+    """A run of ticks: one entry per tick."""
+
+    position: np.ndarray        # [stored ticks]
+    rate: np.ndarray            # [stored ticks per tick]
+    confidence: np.ndarray      # [0, 1]
+    state: np.ndarray           # int8 state codes (index into STATES)
+    flags: np.ndarray           # uint32 FLAGS bits
+    ns: np.ndarray | None = None  # wall time of each C step [ns], when timed
+
+
+def c_options(settings: FollowConfig | None = None, period: float = 0.020, **overrides) -> dict:
+    """The C options (ticks, see default_options) for figure settings in SI
+    units at tick period [s]; overrides name C options directly."""
+    s = settings or FollowConfig()
+    if not period > 0:
+        raise FollowError(f"tick period {period!r} s must be > 0")
+    opt = _follow.default_options()
+    ticks = lambda seconds: seconds / period                      # noqa: E731 [s] -> [ticks]
+    opt.update(mode=s.mode, rate_min=s.rate_min, rate_max=s.rate_max, delay=ticks(s.latency),
+               lock_threshold=s.lock_threshold, lock_margin=s.lock_margin,
+               lost_after=ticks(s.lost_after), pause_after=max(1.0, ticks(s.pause_after)),
+               search_budget=s.search_budget, range_db=s.range_db)
+    opt["window"] = max(opt["min_window"], int(round(ticks(s.window))))
+    # at most MAX_RATES search rates, whatever the rate range
+    opt["rate_step"] = max(opt["rate_step"], (s.rate_max - s.rate_min) / (MAX_RATES - 1) * 1.000001)
+    opt.update(overrides)
+    return opt
+
+
+def default_options() -> dict:
+    """The C follower's own defaults (ticks, 1, dB)."""
+    return _follow.default_options()
+
+
+class Follower:
+    """The C follower over stored (linear loudness, one value per tick, >= 0).
+
+    settings: a FollowConfig (the figure's [follow] table) or None for the
+    defaults; period: tick period [s]; options: C options by name, which
+    override the settings (see default_options()).
+    """
+
+    def __init__(self, stored, settings: FollowConfig | None = None, period: float = 0.020,
+                 **options):
+        stored = np.asarray(stored, dtype=np.float64)
+        if stored.ndim != 1 or len(stored) < 2:
+            raise FollowError(f"stored loudness must be a 1-d array of at least 2 values, "
+                              f"got shape {stored.shape}")
+        bad = np.flatnonzero(~(np.isfinite(stored) & (stored >= 0)))
+        if len(bad):
+            raise FollowError(f"stored loudness[{bad[0]}] = {float(stored[bad[0]])!r} must be finite and >= 0")
+        opt = c_options(settings, period, **options)
+        try:
+            self._f = _follow.Follower(stored, opt)
+        except KeyError as exc:
+            raise FollowError(f"unknown follower option {exc.args[0]!r} "
+                              f"(known: {', '.join(sorted(_follow.OPTION_KINDS))})") from None
+        except ValueError as exc:
+            raise FollowError(f"the follower refused its options {opt} "
+                              f"(status {exc.args[0] if exc.args else '?'})") from None
+        self.period = float(period)             # [s]
+        self.options = dict(self._f.options)
+
+    @property
+    def stored_length(self) -> int:
+        """Stored frames [ticks]."""
+        return self._f.stored_length
+
+    def step(self, live: float = float("nan")) -> FollowOut:
+        """One tick with the newest live frame (linear loudness; NaN: none came)."""
+        p, r, c, s, fl = self._f.step(float(live))
+        return FollowOut(position=p, rate=r, confidence=c, state=STATES[s], flags=fl)
+
+    def run(self, live, timing: bool = False) -> Track:
+        """One tick per live frame (NaN: no frame that tick), in C without the GIL."""
+        live = np.asarray(live, dtype=np.float64)
+        if live.ndim != 1:
+            raise FollowError(f"live frames must be a 1-d array, got shape {live.shape}")
+        out = self._f.run(live, timing)
+        return Track(position=out["position"], rate=out["rate"], confidence=out["confidence"],
+                     state=out["state"], flags=out["flags"], ns=out.get("ns"))
+
+    def reset(self, position: float | None = None) -> None:
+        """The live music is at position [stored ticks] now (a known start or
+        a seek); None: unknown, search the whole piece."""
+        self._f.reset(float("nan") if position is None else float(position))
+
+    def counters(self) -> dict:
+        """steps, frames, missing, bad_input, measurements, rejected, locks,
+        pauses, resumes, search_steps."""
+        return self._f.counters()
+
+
+def sync_ticks(live_frames) -> np.ndarray:
+    """Live frames laid on the tick grid the way the engine sees them: tick
+    k has heard the live audio up to k * T, so it gets frame k - 1, and tick
+    0 gets none (NaN). Length len(live_frames) + 1."""
+    live_frames = np.asarray(live_frames, dtype=np.float64)
+    return np.concatenate([[np.nan], live_frames])
+
+
+def engine_options(config, show, mode: str | bool = True) -> bytes:
+    """The C options of the follower the engine runs in its tick, for a
+    figure (its [follow] table) and a show (whose stored loudness it follows).
+    mode: "smooth", "paper", or True for the figure's own."""
+    stored = np.asarray(show.loudness, dtype=np.float64)
+    bad = np.flatnonzero(~(np.isfinite(stored) & (stored >= 0)))
+    if len(stored) < 2 or len(bad):
+        raise FollowError(f"{show.path}: following the music needs the show's stored loudness, "
+                          f"finite and >= 0 at every tick"
+                          + (f"; tick {bad[0]} has {float(stored[bad[0]])!r}" if len(bad) else ""))
+    if not np.any(stored > 0):
+        raise FollowError(f"{show.path}: the stored loudness is silent throughout; nothing to follow")
+    overrides = {} if mode is True else {"mode": mode}
+    try:
+        return _follow.options_bytes(c_options(config.follow, config.tick_period, **overrides))
+    except KeyError as exc:
+        raise FollowError(f"unknown follower option {exc.args[0]!r}") from None

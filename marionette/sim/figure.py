@@ -1,0 +1,97 @@
+"""All simulated servo nodes of a figure, fed decoded protocol messages.
+
+This is the in-process simulator: the serial and CAN front ends of
+`marionette sim` feed it, and unit tests can feed it directly. Model time
+is whatever the caller passes [s]: wall-clock time in the simulator
+process, tick * period for a virtual clock.
+"""
+from __future__ import annotations
+
+from collections import defaultdict
+
+import numpy as np
+
+from marionette import protocol
+from marionette.config import FigureConfig
+from marionette.sim.faults import Faults
+from marionette.sim.node import DEFAULT_WATCHDOG_TICKS, SimNode
+
+
+class SimFigure:
+    def __init__(self, config: FigureConfig, faults: Faults | None = None,
+                 watchdog_ticks: int = DEFAULT_WATCHDOG_TICKS, trace: bool = False):
+        self.config = config
+        self.faults = faults or Faults()
+        by_node = defaultdict(list)
+        for a in config.axes:
+            by_node[a.node].append(a)
+        self.nodes = {n: SimNode(n, axes, config.tick_period, watchdog_ticks)
+                      for n, axes in sorted(by_node.items())}
+        # where each figure axis lives: (node, index on that node)
+        self._where = [(a.node, self.nodes[a.node].channels.index(a.channel)) for a in config.axes]
+        self.messages = 0                   # messages taken
+        self.trace = [] if trace else None  # (time [s], tick, positions [unit] in figure order)
+
+    def positions(self) -> np.ndarray:
+        """Actual positions [unit] of the figure's axes, in configuration order."""
+        return np.array([self.nodes[n].model.position[j] for n, j in self._where])
+
+    def advance_to(self, t: float) -> None:
+        for node in self.nodes.values():
+            node.advance_to(t)
+
+    def handle(self, message, t: float, rejected: int = 0) -> list:
+        """Act on one message at model time t [s]; returns the answers (messages).
+        rejected: frames the link refused so far (reported in STATUS)."""
+        self.messages += 1
+        kind = type(message)
+        if kind is protocol.Sync:
+            return self._on_sync(message, t, rejected)
+        if kind is protocol.Setpoints:
+            accepted = {}
+            for node, channel, counts in message.entries:
+                sim = self._listening(node)
+                if sim is None:
+                    continue
+                if node not in accepted:
+                    accepted[node] = sim.on_tick(message.tick)
+                if accepted[node]:
+                    sim.on_setpoint(message.tick, channel, counts, t)
+            return []
+        if kind in (protocol.Estop, protocol.EstopRelease):
+            for sim in self._addressed(message.node):
+                (sim.on_estop if kind is protocol.Estop else sim.on_release)(t)
+            return []
+        if kind is protocol.Config:
+            return [a for sim in self._addressed(message.node) for a in sim.on_config(message, t)]
+        return []                       # what nodes send, seen on a shared line
+
+    def _listening(self, node: int) -> SimNode | None:
+        if node in self.faults.silent:
+            return None
+        return self.nodes.get(node)
+
+    def _addressed(self, node: int) -> list[SimNode]:
+        if node == protocol.BROADCAST:
+            return [s for n, s in self.nodes.items() if n not in self.faults.silent]
+        sim = self._listening(node)
+        return [] if sim is None else [sim]
+
+    def _on_sync(self, sync, t: float, rejected: int) -> list:
+        self.advance_to(t)
+        if self.trace is not None:
+            self.trace.append((t, sync.tick, self.positions()))
+        answers = []
+        for sim in self._addressed(protocol.BROADCAST):
+            sim.on_sync(sync.tick)
+            if sync.poll in (protocol.BROADCAST, sim.node):
+                answers += sim.answer(sync.tick, rejected, self.faults.noise(len(sim.channels)))
+        return answers
+
+    def trace_arrays(self) -> dict:
+        """The trace as arrays: time [s], tick, positions [unit] (ticks x axes)."""
+        if not self.trace:
+            return {"time": np.zeros(0), "tick": np.zeros(0, np.int64),
+                    "positions": np.zeros((0, len(self.config.axes)))}
+        t, k, x = zip(*self.trace)
+        return {"time": np.array(t), "tick": np.array(k, np.int64), "positions": np.array(x)}

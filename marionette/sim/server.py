@@ -1,0 +1,214 @@
+"""The simulator process: simulated nodes behind a real serial line or CAN
+bus, on wall-clock time.
+
+Front ends:
+* serial: a pty speaking the serial protocol (COBS frames); the host opens
+  the printed path with pyserial;
+* slcan: a pty emulating an slcan CAN adapter; the host opens it with
+  python-can's `slcan` interface;
+* udp_multicast: python-can's udp_multicast bus (needs msgpack).
+
+Control lines on stdin change the faults at run time (see Faults.apply) or
+end the run ('quit'); each answer is one JSON line on stdout.
+"""
+from __future__ import annotations
+
+import heapq
+import json
+import os
+import select
+import signal
+import sys
+import time
+
+import numpy as np
+
+from marionette import protocol
+from marionette.sim.faults import Faults
+from marionette.sim.figure import SimFigure
+from marionette.sim.slcan import Pty, SlcanAdapter
+
+POLL = 0.001                # longest wait in the loop [s]
+
+
+def say(**fields) -> None:
+    print(json.dumps(fields), flush=True)
+
+
+class SerialFrontEnd:
+    """Serial protocol on a pty."""
+
+    def __init__(self):
+        self.pty = Pty()
+        self.fd = self.pty.master
+        self.deframer = protocol.Deframer()
+        self.address = {"serial": self.pty.path}
+
+    def receive(self, faults: Faults) -> list:
+        try:
+            data = os.read(self.fd, 65536)
+        except BlockingIOError:
+            return []
+        return self.deframer.feed(faults.mangle(data))
+
+    def send(self, messages: list) -> None:
+        if messages:
+            _write_all(self.fd, b"".join(protocol.encode_serial(m) for m in messages))
+
+    @property
+    def rejected(self) -> int:
+        return self.deframer.rejected
+
+    def counters(self) -> dict:
+        return self.deframer.counters
+
+    def close(self) -> None:
+        self.pty.close()
+
+
+class SlcanFrontEnd:
+    """CAN frames through an slcan adapter emulated on a pty."""
+
+    def __init__(self):
+        self.pty = Pty()
+        self.fd = self.pty.master
+        self.adapter = SlcanAdapter()
+        self.address = {"can": "slcan", "channel": self.pty.path}
+        self.decoder = protocol.CanDecoder()
+        self.frames_dropped = 0
+
+    def receive(self, faults: Faults) -> list:
+        try:
+            data = os.read(self.fd, 65536)
+        except BlockingIOError:
+            return []
+        frames, answer = self.adapter.feed(data)
+        if answer:
+            _write_all(self.fd, answer)
+        return self._decode(frames, faults)
+
+    def _decode(self, frames, faults: Faults) -> list:
+        messages = []
+        for can_id, payload in frames:
+            # a CAN controller drops a frame whose CRC fails: corruption shows as loss
+            if faults.rng.random() < faults.drop_rate + faults.corrupt_rate * 8 * (len(payload) + 6):
+                self.frames_dropped += 1
+                continue
+            messages += self.decoder.feed(can_id, payload)
+        return messages
+
+    @property
+    def rejected(self) -> int:
+        return self.decoder.rejected
+
+    def send(self, messages: list) -> None:
+        lines = b"".join(SlcanAdapter.encode(can_id, data)
+                         for m in messages for can_id, data in protocol.encode_can(m))
+        if lines:
+            _write_all(self.fd, lines)
+
+    def counters(self) -> dict:
+        return {**self.decoder.counters, "frames_dropped": self.frames_dropped,
+                "bad_lines": self.adapter.bad_lines}
+
+    def close(self) -> None:
+        self.pty.close()
+
+
+class UdpFrontEnd(SlcanFrontEnd):
+    """CAN frames over python-can's udp_multicast bus."""
+
+    def __init__(self, channel: str):
+        import can
+        self.bus = can.Bus(interface="udp_multicast", channel=channel, receive_own_messages=False)
+        self.fd = self.bus.fileno()
+        self.address = {"can": "udp_multicast", "channel": channel}
+        self.decoder = protocol.CanDecoder()
+        self.frames_dropped = 0
+
+    def receive(self, faults: Faults) -> list:
+        frames = []
+        while (msg := self.bus.recv(0)) is not None:
+            if not (msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id):
+                frames.append((msg.arbitration_id, bytes(msg.data)))
+        return self._decode(frames, faults)
+
+    def send(self, messages: list) -> None:
+        import can
+        for m in messages:
+            for can_id, data in protocol.encode_can(m):
+                self.bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+
+    def counters(self) -> dict:
+        return {**self.decoder.counters, "frames_dropped": self.frames_dropped}
+
+    def close(self) -> None:
+        self.bus.shutdown()
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view = memoryview(data)
+    while view:
+        try:
+            n = os.write(fd, view)
+        except BlockingIOError:
+            select.select([], [fd], [], 0.01)
+            continue
+        view = view[n:]
+
+
+class _Stop(Exception):
+    pass
+
+
+def _stop_on_signal(signum, frame):
+    raise _Stop
+
+
+def run(figure: SimFigure, front, faults: Faults, seconds: float | None = None,
+        trace_path: str | None = None, control=sys.stdin) -> dict:
+    """Serve until 'quit' on stdin, SIGTERM or SIGINT, or seconds [s] pass."""
+    os.set_blocking(front.fd, False)
+    signal.signal(signal.SIGTERM, _stop_on_signal)
+    say(ready=True, **front.address)
+    try:
+        _serve(figure, front, faults, seconds, control)
+    except (_Stop, KeyboardInterrupt):
+        pass
+    summary = {"messages": figure.messages, "link": front.counters(),
+               "bytes_dropped": faults.bytes_dropped, "bytes_corrupted": faults.bytes_corrupted,
+               "nodes": {n: vars(s.counters) for n, s in figure.nodes.items()}}
+    if trace_path:
+        np.savez(trace_path, **figure.trace_arrays())
+    front.close()
+    return summary
+
+
+def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, control) -> None:
+    t0 = time.monotonic()
+    now = lambda: time.monotonic() - t0
+    pending: list = []          # (due time [s], order, message): the delay fault
+    order = 0
+    watch = [front.fd] + ([control] if control is not None else [])
+    while seconds is None or now() < seconds:
+        readable, _, _ = select.select(watch, [], [], POLL)
+        if control is not None and control in readable:
+            line = control.readline()
+            if not line:                    # stdin closed (e.g. /dev/null): run on
+                watch.remove(control)
+                control = None
+            elif line.strip() == "quit":
+                return
+            elif line.strip():
+                try:
+                    say(ok=faults.apply(line.strip()))
+                except ValueError as exc:
+                    say(error=str(exc))
+        if front.fd in readable:
+            t = now()
+            for m in front.receive(faults):
+                heapq.heappush(pending, (t + faults.delay, order, m))
+                order += 1
+        while pending and pending[0][0] <= now():
+            due, _, m = heapq.heappop(pending)
+            front.send(figure.handle(m, due, front.rejected))

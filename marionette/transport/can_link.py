@@ -1,0 +1,93 @@
+"""Servo nodes on a CAN bus, through any python-can interface (socketcan,
+pcan, kvaser, slcan, virtual, udp_multicast...).
+
+Setpoints: the C tick encodes each tick's CAN frames (SYNC and setpoint
+PDOs, firmware_protocol/SPEC.md) into the engine's ring, and the engine's
+sender thread hands them to bus.send(). Status, heartbeat and EMCY frames
+coming back are decoded by the C codec on a receive thread and handed to a
+NodeMonitor.
+"""
+from __future__ import annotations
+
+import threading
+
+import can
+
+from marionette import protocol
+from marionette.transport.node_monitor import NodeMonitor
+
+RECV_TIMEOUT = 0.01         # receive thread poll [s]
+
+
+class CanLink:
+    protocol = "can"
+
+    def __init__(self, bus: can.BusABC | None = None, **bus_kwargs):
+        """Wrap a bus, or open one: CanLink(interface="slcan", channel="/dev/ttyACM0", bitrate=500000)."""
+        if bus is None:
+            if bus_kwargs.get("interface") == "slcan":
+                bus_kwargs.setdefault("sleep_after_open", 0.0)
+            try:
+                bus = can.Bus(**bus_kwargs)
+            except (can.CanError, OSError, ValueError, ImportError) as exc:
+                raise OSError(f"CAN link {bus_kwargs}: {exc}") from None
+        self.bus = bus
+        self.monitor: NodeMonitor | None = None
+        self.decoder = protocol.CanDecoder()    # also fed our own SYNCs: it unwraps STATUS ticks
+        self._decoder_lock = threading.Lock()
+        self.send_errors = 0
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    def fileno(self) -> None:
+        """No fast path: frames go through python-can (see docs/architecture.md)."""
+        return None
+
+    def write(self, records: bytes) -> None:
+        """Send the CAN frames of one or more ticks taken from the engine's ring."""
+        for can_id, data in protocol.can_records(records):
+            self.send_frame(can_id, data)
+
+    def send_frame(self, can_id: int, data: bytes) -> None:
+        if can_id == protocol.CAN_SYNC:
+            with self._decoder_lock:
+                self.decoder.feed(can_id, data)
+        try:
+            self.bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+        except can.CanError:
+            self.send_errors += 1
+
+    def send(self, message) -> None:
+        """Encode and send one protocol message (ESTOP, CONFIG...)."""
+        for can_id, data in protocol.encode_can(message):
+            self.send_frame(can_id, data)
+
+    def start_receiving(self, monitor: NodeMonitor) -> None:
+        self.monitor = monitor
+        self._thread = threading.Thread(target=self._receive, name="marionette-can-rx", daemon=True)
+        self._thread.start()
+
+    def _receive(self) -> None:
+        while not self._stop.is_set():
+            try:
+                msg = self.bus.recv(RECV_TIMEOUT)
+            except (can.CanError, OSError, ValueError):
+                if self._stop.is_set():
+                    return
+                continue
+            if msg is None or msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
+                continue
+            with self._decoder_lock:
+                before = self.decoder.rejected
+                messages = self.decoder.feed(msg.arbitration_id, bytes(msg.data))
+                bad = self.decoder.rejected - before
+            if bad:
+                self.monitor.on_bad_frame(bad)
+            for message in messages:
+                self.monitor.take(message)
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(1.0)
+        self.bus.shutdown()

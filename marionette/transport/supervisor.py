@@ -1,0 +1,74 @@
+"""Watches the servo nodes while the engine runs: starts the link's receive
+path, finds silent nodes once per tick, and marks silent or faulted nodes
+in every flight record (the record's node_alarms bits).
+
+Also the operator's messages to the nodes that are not setpoints: CONFIG
+(limits, watchdog), ESTOP and its release.
+"""
+from __future__ import annotations
+
+import threading
+
+from marionette import protocol
+from marionette.config import FigureConfig
+from marionette.transport.node_monitor import NodeMonitor
+
+POLL = 0.004                # how often the supervisor looks at the tick counter [s]
+
+
+class LinkSupervisor:
+    def __init__(self, link, config: FigureConfig, current_tick, set_alarms, on_loudness=None):
+        """current_tick(): the engine's latest tick number (or None before the first);
+        set_alarms(mask): hands the alarm bits to the C tick."""
+        self.link = link
+        self.config = config
+        self.nodes = NodeMonitor({a.node for a in config.axes}, on_loudness=on_loudness)
+        # (engine tick, node, evidence tick) of each silent-node report
+        self.reports: list[tuple[int, int, int]] = []
+        self._current_tick = current_tick
+        self._set_alarms = set_alarms
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        link.start_receiving(self.nodes)
+
+    def start(self) -> None:
+        """Check the nodes once per tick while the real-time loop runs."""
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._watch, name="marionette-nodes", daemon=True)
+            self._thread.start()
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(1.0)
+            self._thread = None
+
+    def check(self) -> None:
+        tick = self._current_tick()
+        if tick is None:
+            return
+        for node, evidence in self.nodes.check(tick):
+            self.reports.append((tick, node, evidence))
+        self._set_alarms(self.nodes.alarm_mask())
+
+    def _watch(self) -> None:
+        last = None
+        while not self._stop.wait(POLL):
+            tick = self._current_tick()
+            if tick != last:
+                last = tick
+                self.check()
+
+    # -- messages to the nodes ---------------------------------------------
+
+    def configure(self, watchdog_ticks: int = 5) -> None:
+        """Send every node its limits (in counts) and the watchdog time."""
+        for node in sorted(self.nodes.nodes):
+            self.link.send(protocol.node_config(self.config, node, watchdog_ticks))
+
+    def estop(self, node: int = protocol.BROADCAST) -> None:
+        self.link.send(protocol.Estop(node))
+
+    def release(self, node: int = protocol.BROADCAST) -> None:
+        self.link.send(protocol.EstopRelease(node))

@@ -1,0 +1,245 @@
+"""The music follower (ext/mar_follow.c through marionette.follow): it locks
+and follows a fast tape, holds through a pause, finds an unknown start,
+stays put on silence and noise, and refuses bad input without noticing it.
+The C code also runs standalone under AddressSanitizer and UBSan, with
+allocation counting around the steps.
+
+Live audio is synthesized music (marionette.bench.music) played through the
+simulated tape deck (marionette.bench.tape), whose time warp is the truth.
+Positions are compared in seconds of taught music; no timing assertions.
+"""
+from __future__ import annotations
+
+import math
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from marionette.bench.music import synthesize
+from marionette.bench.tape import Deck, play
+from marionette.config import FollowConfig, config_from_dict
+from marionette.errors import ConfigError
+from marionette.follow import STATES, FollowError, Follower, c_options, sync_ticks
+from marionette.loudness import loudness
+from conftest import figure_dict
+
+ROOT = Path(__file__).resolve().parents[1]
+T = 0.020                                            # tick [s]
+LOCKED, HOLDING, PAUSED = (STATES.index(s) for s in ("locked", "holding", "paused"))
+
+
+@pytest.fixture(scope="module")
+def piece():
+    return synthesize("pop", seed=1)
+
+
+@pytest.fixture(scope="module")
+def stored(piece):
+    return loudness(piece.samples, piece.sample_rate)
+
+
+def live_track(piece, stored, deck, mode="smooth", start=None):
+    """Runs the follower over the deck's recording; (track, played, error [s] per tick)."""
+    played = play(piece.samples, piece.sample_rate, deck)
+    live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
+    f = Follower(stored, mode=mode)
+    if start is not None:
+        f.reset(start)
+    track = f.run(live)
+    return track, played, track.position * T - played.truth, f
+
+
+def first_lock(track, err, after=0.0, within=0.05):
+    """Live time [s] of the first tick LOCKED within `within` [s] of the truth, from after [s]."""
+    t = np.arange(len(err)) * T
+    idx = np.flatnonzero((track.state == LOCKED) & (np.abs(err) <= within) & (t >= after))
+    return t[idx[0]] if len(idx) else math.inf
+
+
+def test_c_follower_under_asan_ubsan_without_step_allocations(tmp_path):
+    if shutil.which("gcc") is None:
+        pytest.skip("needs gcc")
+    exe = tmp_path / "test_follow"
+    base = ["-std=c11", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
+            "-I", str(ROOT / "ext")]
+    build = subprocess.run(
+        ["gcc", *base, "-g", "-O1", "-fsanitize=address,undefined", "-fno-omit-frame-pointer",
+         "-fno-sanitize-recover=all", str(ROOT / "ext" / "mar_follow.c"),
+         str(ROOT / "ext" / "tests" / "test_follow.c"), "-o", str(exe), "-lm",
+         "-Wl,--wrap=malloc,--wrap=calloc,--wrap=realloc,--wrap=free"], capture_output=True, text=True)
+    assert build.returncode == 0 and not build.stderr, build.stderr
+    run = subprocess.run([str(exe)], capture_output=True, text=True, timeout=300,
+                         env={"ASAN_OPTIONS": "detect_leaks=1", "UBSAN_OPTIONS": "print_stacktrace=1"})
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "C follower tests passed" in run.stdout
+
+
+def test_locks_and_follows_a_three_percent_fast_tape(piece, stored):
+    deck = Deck(speed=1.03, wow=0.002, flutter=0.0005, snr_db=30.0, sample_rate=22050, seed=1)
+    track, played, err, f = live_track(piece, stored, deck)
+    assert first_lock(track, err) <= 4.0
+    after = np.arange(len(err)) * T >= 5.0
+    assert np.mean(np.abs(err[after]) <= 0.020) >= 0.95
+    assert np.max(np.abs(err[after])) <= 0.1
+    # the rate is the tape's speed
+    assert abs(np.median(track.rate[after]) - 1.03) < 0.003
+    assert np.all(track.state[after] != STATES.index("searching"))
+
+
+def test_paper_mode_doubles_or_skips_whole_samples(piece, stored):
+    deck = Deck(speed=1.03, snr_db=30.0, seed=2)
+    track, played, err, f = live_track(piece, stored, deck, mode="paper")
+    following = track.state != STATES.index("searching")
+    assert np.any(following)
+    assert set(np.unique(track.rate[following])) <= {0.0, 1.0, 2.0}
+    assert np.all(track.position[following] == np.round(track.position[following]))
+    after = np.arange(len(err)) * T >= 5.0
+    assert np.mean(np.abs(err[after]) <= 0.050) >= 0.9       # the baseline still follows
+
+
+def test_holds_through_a_pause_and_resumes(piece, stored):
+    deck = Deck(speed=0.97, snr_db=30.0, pauses=((20.0, 4.0),), start=10.0, seed=3)
+    track, played, err, f = live_track(piece, stored, deck)
+    t = np.arange(len(err)) * T
+    paused = (t > 20.5) & (t < 24.0)
+    assert np.all(track.state[paused] == PAUSED)
+    assert np.all(track.rate[paused] == 0.0)
+    assert np.max(np.abs(err[paused])) <= 0.05               # held where the tape stopped
+    after = (t >= 24.0 + 0.5) & (t < 40.0)
+    assert np.all(np.abs(err[after]) <= 0.05)                # going on from there
+    assert np.all(track.state[after] != PAUSED)
+    assert f.counters()["pauses"] == 1 and f.counters()["resumes"] == 1
+
+
+def test_finds_an_unknown_start_without_false_locks(piece, stored):
+    """Six random starts: each locks, most within 3 s; a start early in a
+    repeated chorus takes longer (its twins match as well until the window
+    reaches music that differs), but no lock is ever off by more than 0.2 s."""
+    rng = np.random.default_rng(100)
+    times = []
+    for case in range(6):
+        start = float(rng.uniform(0.0, piece.duration - 40.0))
+        deck = Deck(speed=float(rng.uniform(0.95, 1.05)), wow=0.003, snr_db=25.0, start=start,
+                    sample_rate=float(rng.choice([11025, 16000, 22050])), seconds=30.0, seed=case)
+        track, played, err, f = live_track(piece, stored, deck)
+        times.append(first_lock(track, err))
+        entered = np.flatnonzero((track.state == LOCKED)
+                                 & (np.concatenate([[-1], track.state[:-1]]) != LOCKED))
+        assert np.all(np.abs(err[entered]) <= 0.2), (case, start)
+        assert np.all(np.abs(err[track.state == LOCKED]) <= 0.2), (case, start)
+    assert max(times) <= 12.0, times
+    assert sum(t <= 3.0 for t in times) >= 4, times
+
+
+def test_known_start_follows_at_once(piece, stored):
+    deck = Deck(speed=1.0, snr_db=30.0, start=30.0, seconds=15.0, seed=4)
+    track, played, err, f = live_track(piece, stored, deck, start=30.0 / T)
+    assert track.state[0] == HOLDING
+    assert np.all(np.abs(err[:100]) <= 0.05)                  # no search, no detour
+    assert np.mean(track.state[50:] == LOCKED) > 0.9
+
+
+@pytest.mark.parametrize("kind", ["silence", "hiss", "missing"])
+def test_does_not_wander_on_silence_or_noise(stored, kind):
+    rng = np.random.default_rng(7)
+    n = 3000                                                  # 60 s
+    if kind == "silence":
+        live = np.zeros(n)
+    elif kind == "hiss":
+        live = 1e-3 * np.exp(rng.normal(0.0, 0.05, n))        # steady noise, about -60 dBFS
+    else:
+        live = np.full(n, np.nan)
+    # from nothing: never locks, stays at rate 0
+    f = Follower(stored)
+    track = f.run(live)
+    assert np.all(track.state == STATES.index("searching"))
+    assert np.all(track.rate == 0.0) and np.all(track.position == 0.0)
+    assert f.counters()["locks"] == 0
+    # following the music from tick 500, then the input goes quiet at 1500
+    f = Follower(stored)
+    f.reset(500.0)
+    f.run(sync_ticks(stored[500:1500])[:1000])
+    track = f.run(live)
+    assert f.counters()["locks"] == 0                         # no lock anywhere else
+    steps = np.diff(np.concatenate([[1500.0], track.position]))
+    assert np.all((steps >= -15.0) & (steps <= 1.1 + 1e-9))  # the flywheel, or back to the pause's start
+    assert not np.any(track.state[200:] == LOCKED)
+    if kind in ("silence", "hiss"):                           # the recorder stopped: held there
+        assert np.all(track.state[20:] == PAUSED)
+        assert np.all(track.position[20:] == track.position[-1])
+        assert 1490.0 <= track.position[-1] <= 1502.0        # (the music itself is silent from 1495)
+    else:                                                     # no frames: the flywheel at the rate
+        assert abs(track.position[-1] - (1500.0 + n)) < 0.05 * n
+
+
+def test_bad_input_is_refused_without_disturbing_the_state(stored):
+    rng = np.random.default_rng(11)
+    for case in range(20):
+        start = int(rng.integers(0, len(stored) - 2000))
+        live = stored[start:start + 1500] * 10 ** (rng.uniform(-20, 20) / 20)
+        live = np.where(rng.random(len(live)) < 0.05, np.nan, live)
+        bad_at = rng.random(len(live)) < 0.05
+        bad = rng.choice([-1.0, -1e-9, np.inf, -np.inf, -1e300], len(live))
+        polluted = np.where(bad_at, bad, live)
+        missing = np.where(bad_at, np.nan, live)
+        a, b = Follower(stored), Follower(stored)
+        ta, tb = a.run(polluted), b.run(missing)
+        for key in ("position", "rate", "confidence", "state"):
+            assert np.array_equal(getattr(ta, key), getattr(tb, key)), key
+        flagged = (ta.flags & 2) != 0                         # MAR_FOLLOW_F_BAD_INPUT
+        assert np.array_equal(flagged, bad_at)
+        assert a.counters()["bad_input"] == int(bad_at.sum())
+        assert b.counters()["bad_input"] == 0
+
+
+def test_step_and_run_agree(stored):
+    live = sync_ticks(stored[2000:3000] * 0.3)
+    a, b = Follower(stored), Follower(stored)
+    ta = a.run(live)
+    steps = [b.step(x) for x in live]
+    assert np.array_equal(ta.position, [s.position for s in steps])
+    assert [STATES[s] for s in ta.state] == [s.state for s in steps]
+
+
+def test_python_api_refuses_bad_arguments(stored):
+    with pytest.raises(FollowError, match="stored loudness\\[1\\]"):
+        Follower([0.1, -0.5, 0.2])
+    with pytest.raises(FollowError, match="at least 2"):
+        Follower([0.1])
+    with pytest.raises(FollowError, match="unknown follower option 'speed'"):
+        Follower(stored, speed=2)
+    with pytest.raises(FollowError, match="refused its options"):
+        Follower(stored, window=1)
+    with pytest.raises(FollowError, match="1-d"):
+        Follower(stored).run(np.zeros((2, 2)))
+
+
+def test_settings_in_seconds_become_ticks():
+    opt = c_options(FollowConfig(window=3.0, latency=0.04, lost_after=2.0, rate_min=0.5, rate_max=3.0),
+                    period=0.02)
+    assert opt["window"] == 150 and opt["delay"] == pytest.approx(2.0)
+    assert opt["lost_after"] == pytest.approx(100.0)
+    assert (opt["rate_max"] - opt["rate_min"]) / opt["rate_step"] + 1 <= 64
+
+
+def test_follow_table_in_the_figure_config():
+    d = figure_dict()
+    assert config_from_dict(d, "f.toml").follow == FollowConfig()
+    d["follow"] = {"mode": "paper", "rate_max": 1.2, "window": 2.5, "search_budget": 100}
+    cfg = config_from_dict(d, "f.toml").follow
+    assert (cfg.mode, cfg.rate_max, cfg.window, cfg.search_budget) == ("paper", 1.2, 2.5, 100)
+    for table, message in [({"mode": "fast"}, "f.toml: follow.mode = 'fast'"),
+                           ({"rate_min": 1.5}, "f.toml: follow.rate_min = 1.5 must be in"),
+                           ({"speed": 1}, "f.toml: follow.speed = 1 is not a known key"),
+                           ({"window": "long"}, "f.toml: follow.window = 'long' is not a number"),
+                           ({"search_budget": 0}, "f.toml: follow.search_budget = 0"),
+                           ({"lock_threshold": float("nan")}, "follow.lock_threshold = nan is not finite")]:
+        d["follow"] = table
+        with pytest.raises(ConfigError, match=message.replace("[", "\\[")):
+            config_from_dict(d, "f.toml")
+    d["follow"] = 3
+    with pytest.raises(ConfigError, match="\\[follow\\] must be a table"):
+        config_from_dict(d, "f.toml")
