@@ -10,12 +10,14 @@ import argparse
 import importlib
 import os
 import sys
+import threading
+import time
 
 import numpy as np
 
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
-from marionette.engine import INTERPOLATIONS, LEAD_MODES, Engine
+from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
 from marionette.show import LIMIT_POLICIES, load_show
 
@@ -40,27 +42,71 @@ def cmd_check(args) -> int:
     return 0
 
 
+def _live_frames(args, config):
+    """The live music's loudness frames from --music (a recording played
+    back as if live), or None."""
+    if not args.music:
+        return None
+    from marionette.loudness import wav_loudness
+    return wav_loudness(args.music, config.tick_period)
+
+
+def _feed_in_real_time(engine, frames, period: float, stop: threading.Event) -> None:
+    """Push one frame per period [s], as a sound card would."""
+    start = time.monotonic()
+    for k, value in enumerate(frames):
+        if stop.wait(max(0.0, start + (k + 1) * period - time.monotonic())):
+            return
+        engine.push_loudness(float(value))
+
+
 def cmd_play(args) -> int:
     config, show = _figure_and_show(args)
-    output_fd = None
+    output = None
+    if args.output and args.link:
+        raise MarionetteError("give --output or --link, not both")
     if args.output:
-        output_fd = os.open(args.output, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
+        output = os.open(args.output, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
+    elif args.link:
+        from marionette.transport import open_link
+        output = open_link(args.link)
+    live = _live_frames(args, config)
     n = args.ticks if args.ticks is not None else show.n_ticks
+    follow = args.follow or (True if (live is not None or args.audio_device is not None) else None)
+    audio, stop_feed = None, threading.Event()
     try:
         with Engine(config, show, lead=args.lead, interpolation=args.interpolation,
-                    output=output_fd, record=args.record or True, rate=args.rate) as engine:
+                    output=output, record=args.record or True, rate=args.rate,
+                    follow=follow) as engine:
+            if args.audio_device is not None:
+                from marionette.live_audio import LiveLoudness
+                audio = LiveLoudness(engine.push_loudness, device=args.audio_device or None).start()
             if args.realtime:
                 engine.start(priority=args.priority, cpu=args.cpu, lock_memory=args.lock_memory,
                              max_ticks=n)
+                if live is not None:
+                    threading.Thread(target=_feed_in_real_time, daemon=True,
+                                     args=(engine, live, config.tick_period, stop_feed)).start()
                 engine.wait()
                 engine.stop()
+            elif live is not None:
+                for k in range(n):
+                    if k < len(live):
+                        engine.push_loudness(float(live[k]))
+                    engine.step(1)
             else:
                 engine.step(n)
             stats = engine.stats()
             records = engine.records()
+            nodes = engine.nodes.summary() if engine.nodes is not None else None
     finally:
-        if output_fd is not None:
-            os.close(output_fd)
+        stop_feed.set()
+        if audio is not None:
+            audio.stop()
+        if isinstance(output, int):
+            os.close(output)
+        elif output is not None:
+            output.close()
     mode = "real time" if args.realtime else "step mode"
     print(f"played {show.path} on {config.name} in {mode}: {stats['ticks']} ticks "
           f"({stats['ticks'] * config.tick_period:.2f} s of show), lead {args.lead}, "
@@ -70,9 +116,22 @@ def cmd_play(args) -> int:
     print(f"  flight recorder: {stats['recorded']} records, {stats['records_dropped']} dropped"
           + (f", written to {args.record}" if args.record else ""))
     print(f"  limits acted on {stats['limited']} axis-ticks; bad inputs refused: {stats['bad_input']}")
-    if args.output:
-        print(f"  output {args.output}: {stats['sink_frames']} ticks sent, {stats['sink_bytes']} bytes, "
-              f"{stats['sink_errors']} lost")
+    if args.output or args.link:
+        print(f"  output {args.output or args.link}: {stats['sink_frames']} ticks sent, "
+              f"{stats['sink_bytes']} bytes, {stats['sink_errors']} lost")
+    if nodes is not None:
+        print(f"  servo nodes: {nodes['frames_ok']} frames back, {nodes['frames_bad']} refused")
+        for node, s in nodes["nodes"].items():
+            print(f"    node {node}: {s['statuses']} statuses, last tick {s['last_tick']}, "
+                  f"flags 0x{s['flags']:02x}, {s['errors']} errors"
+                  + (", SILENT" if s["silent"] else ""))
+    if follow:
+        states = records["follow_state"]
+        share = ", ".join(f"{name} {np.mean(states == code):.0%}"
+                          for code, name in FOLLOW_STATES.items())
+        print(f"  music follower ({args.follow or config.follow.mode}): {share}; "
+              f"position at the end {records['position'][-1]:.1f} ticks, "
+              f"rate {records['rate'][-1]:.3f}")
     c = stats["compute"]
     print(f"  tick compute [us]: p50 {c['p50_us']:.2f}  p99 {c['p99_us']:.2f}  "
           f"p99.9 {c['p999_us']:.2f}  max {c['max_us']:.2f}")
@@ -129,6 +188,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--lock-memory", action="store_true", help="mlockall before starting")
     p.add_argument("--record", help="write the flight record to this file")
     p.add_argument("--output", help="write the setpoint frames to this file or device")
+    p.add_argument("--link", help="send to servo nodes: serial:URL[@BAUD] or "
+                                  "can:INTERFACE:CHANNEL[@BITRATE] (see 'marionette sim')")
+    p.add_argument("--follow", choices=("smooth", "paper"),
+                   help="follow the live music (default mode with --music or --audio-device: "
+                        "the figure's [follow] table)")
+    p.add_argument("--music", help="the live music from this recording, played back as if live")
+    p.add_argument("--audio-device", nargs="?", const="",
+                   help="the live music from this sound card input (index or part of its name; "
+                        "no value: the default input); needs the 'audio' extra")
     p.set_defaults(run=cmd_play)
 
     p = sub.add_parser("check", help="validate a figure and a show")

@@ -27,7 +27,9 @@ def register(sub) -> None:
     p.add_argument("--noise", type=float, default=0.0, help="reported position noise [counts, std dev]")
     p.add_argument("--silent", type=int, nargs="*", default=[], help="nodes that do not answer")
     p.add_argument("--seed", type=int, default=0, help="seed of the fault injection")
-    p.add_argument("--trace", help="write the simulated positions at each SYNC to this .npz")
+    p.add_argument("--trace", help="write, at each SYNC, its arrival time (model time [s]; t0: "
+                                   "CLOCK_MONOTONIC of model time 0), tick and the simulated "
+                                   "positions [unit] to this .npz")
     p.add_argument("--priority", type=int, default=0,
                    help="run at this SCHED_FIFO priority when permitted (0: normal), so the "
                         "simulated nodes keep time on a busy machine")

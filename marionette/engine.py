@@ -39,6 +39,7 @@ RECORD_SLOTS = 4096      # flight-recorder ring [ticks], 82 s at 20 ms
 LOUDNESS_SLOTS = 256     # live loudness input ring [frames]
 FRAME_SLOTS = 256        # setpoint frames waiting for the Python sender [ticks]
 DRAIN_INTERVAL = 0.05    # how often the Python threads empty the rings [s]
+SEND_INTERVAL = 0.001    # ... and the frame ring, for a link without a descriptor [s]
 MAX_RATE = 10.0          # playback rate bound [show ticks per tick]
 
 
@@ -269,7 +270,7 @@ class Engine:
 
     def _drain_loop(self) -> None:
         # Waits on the event between drains, so stop() wakes it at once.
-        interval = DRAIN_INTERVAL if self._writer is None else self.config.tick_period / 4
+        interval = DRAIN_INTERVAL if self._writer is None else SEND_INTERVAL
         while not self._stop_drain.wait(interval):
             self._drain()
 

@@ -171,21 +171,22 @@ def run(figure: SimFigure, front, faults: Faults, seconds: float | None = None,
     os.set_blocking(front.fd, False)
     signal.signal(signal.SIGTERM, _stop_on_signal)
     say(ready=True, **front.address)
+    t0 = time.monotonic()           # model time 0 [s, CLOCK_MONOTONIC]
     try:
-        _serve(figure, front, faults, seconds, control)
+        _serve(figure, front, faults, seconds, control, t0)
     except (_Stop, KeyboardInterrupt):
         pass
     summary = {"messages": figure.messages, "link": front.counters(),
                "bytes_dropped": faults.bytes_dropped, "bytes_corrupted": faults.bytes_corrupted,
                "nodes": {n: vars(s.counters) for n, s in figure.nodes.items()}}
     if trace_path:
-        np.savez(trace_path, **figure.trace_arrays())
+        np.savez(trace_path, t0=t0, **figure.trace_arrays())
     front.close()
     return summary
 
 
-def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, control) -> None:
-    t0 = time.monotonic()
+def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, control,
+           t0: float) -> None:
     now = lambda: time.monotonic() - t0
     pending: list = []          # (due time [s], order, message): the delay fault
     order = 0
