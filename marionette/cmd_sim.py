@@ -30,6 +30,9 @@ def register(sub) -> None:
     p.add_argument("--trace", help="write, at each SYNC, its arrival time (model time [s]; t0: "
                                    "CLOCK_MONOTONIC of model time 0), tick and the simulated "
                                    "positions [unit] to this .npz")
+    p.add_argument("--music", help="a node measures this recording's loudness, played from the "
+                                   "start of the run, and reports it in LOUDNESS messages")
+    p.add_argument("--loudness-node", type=int, help="the node that does (default: the figure's last)")
     p.add_argument("--priority", type=int, default=0,
                    help="run at this SCHED_FIFO priority when permitted (0: normal), so the "
                         "simulated nodes keep time on a busy machine")
@@ -51,8 +54,13 @@ def cmd_sim(args) -> int:
                   file=sys.stderr)
     faults = Faults(drop_rate=args.drop, corrupt_rate=args.corrupt, delay=args.delay,
                     position_noise=args.noise, silent=set(args.silent), seed=args.seed)
+    music = None
+    if args.music:
+        from marionette.loudness import wav_loudness
+        music = wav_loudness(args.music, config.tick_period)
+    node = args.loudness_node if args.loudness_node is not None else max(a.node for a in config.axes)
     figure = SimFigure(config, faults, args.watchdog_ticks or DEFAULT_WATCHDOG_TICKS,
-                       trace=bool(args.trace))
+                       trace=bool(args.trace), music=music, music_node=node)
     if args.can == "slcan":
         front = SlcanFrontEnd()
     elif args.can == "udp_multicast":

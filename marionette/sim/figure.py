@@ -19,7 +19,10 @@ from marionette.sim.node import DEFAULT_WATCHDOG_TICKS, SimNode
 
 class SimFigure:
     def __init__(self, config: FigureConfig, faults: Faults | None = None,
-                 watchdog_ticks: int = DEFAULT_WATCHDOG_TICKS, trace: bool = False):
+                 watchdog_ticks: int = DEFAULT_WATCHDOG_TICKS, trace: bool = False,
+                 music: np.ndarray | None = None, music_node: int | None = None):
+        """music: loudness frames (one per tick period, from model time 0) that
+        node music_node measures and reports in LOUDNESS messages."""
         self.config = config
         self.faults = faults or Faults()
         by_node = defaultdict(list)
@@ -30,6 +33,9 @@ class SimFigure:
         # where each figure axis lives: (node, index on that node)
         self._where = [(a.node, self.nodes[a.node].channels.index(a.channel)) for a in config.axes]
         self.messages = 0                   # messages taken
+        self.music = None if music is None else np.asarray(music, dtype=float)
+        self.music_node = music_node
+        self._music_sent = 0                # LOUDNESS frames sent
         self.trace = [] if trace else None  # (time [s], tick, positions [unit] in figure order)
 
     def positions(self) -> np.ndarray:
@@ -86,6 +92,12 @@ class SimFigure:
             sim.on_sync(sync.tick)
             if sync.poll in (protocol.BROADCAST, sim.node):
                 answers += sim.answer(sync.tick, rejected, self.faults.noise(len(sim.channels)))
+        if self.music is not None and self.music_node not in self.faults.silent:
+            period = self.config.tick_period
+            while self._music_sent < len(self.music) and (self._music_sent + 1) * period <= t:
+                answers.append(protocol.Loudness(self.music_node, self._music_sent,
+                                                 float(self.music[self._music_sent])))
+                self._music_sent += 1
         return answers
 
     def trace_arrays(self) -> dict:

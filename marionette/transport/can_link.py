@@ -3,7 +3,8 @@ pcan, kvaser, slcan, virtual, udp_multicast...).
 
 Setpoints: the C tick encodes each tick's CAN frames (SYNC and setpoint
 PDOs, firmware_protocol/SPEC.md) into the engine's ring, and the engine's
-sender thread hands them to bus.send(). Status, heartbeat and EMCY frames
+sender thread hands them to bus.send(); on SocketCAN the tick writes them
+to the socket itself. Status, heartbeat and EMCY frames
 coming back are decoded by the C codec on a receive thread and handed to a
 NodeMonitor.
 """
@@ -27,6 +28,10 @@ class CanLink:
         if bus is None:
             if bus_kwargs.get("interface") == "slcan":
                 bus_kwargs.setdefault("sleep_after_open", 0.0)
+            if bus_kwargs.get("interface") == "socketcan":
+                # the tick writes to the socket itself: the receive thread must
+                # see those SYNCs to unwrap the 8-bit ticks of the statuses
+                bus_kwargs.setdefault("receive_own_messages", True)
             try:
                 bus = can.Bus(**bus_kwargs)
             except (can.CanError, OSError, ValueError, ImportError) as exc:
@@ -39,8 +44,13 @@ class CanLink:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
 
-    def fileno(self) -> None:
-        """No fast path: frames go through python-can (see docs/architecture.md)."""
+    def fileno(self) -> int | None:
+        """A SocketCAN socket's descriptor, to which the tick writes its CAN
+        records itself (struct can_frame, one per write); None for every other
+        interface, whose frames go through python-can's send()."""
+        sock = getattr(self.bus, "socket", None)
+        if type(self.bus).__name__ == "SocketcanBus" and sock is not None:
+            return sock.fileno()
         return None
 
     def write(self, records: bytes) -> None:

@@ -32,9 +32,9 @@ def expected_positions(config, commands: np.ndarray, times: np.ndarray) -> np.nd
     return out
 
 
-def play(config, show, link, ticks=TICKS, during=None):
+def play(config, show, link, ticks=TICKS, during=None, follow=None):
     """Plays ticks in real time; during(engine) runs while the loop runs."""
-    with Engine(config, show, output=link, record=True) as engine:
+    with Engine(config, show, output=link, record=True, follow=follow) as engine:
         with warnings.catch_warnings():     # without the privilege: normal priority
             warnings.simplefilter("ignore", RuntimeWarning)
             engine.start(priority=PRIORITY, max_ticks=ticks)
