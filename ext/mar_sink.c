@@ -6,8 +6,8 @@
 #include <string.h>
 #include <unistd.h>
 
-/* Serial: SYNC, then the setpoints in as few SETPOINT frames as fit. */
-static long encode_serial(mar_sink *s, uint32_t tick, uint8_t *buf, size_t cap)
+/* The tick's SYNC: every node answers (poll 0xFF). */
+static mar_msg sync_message(uint32_t tick)
 {
     mar_msg sync;
     memset(&sync, 0, sizeof sync);
@@ -15,6 +15,13 @@ static long encode_serial(mar_sink *s, uint32_t tick, uint8_t *buf, size_t cap)
     sync.node = MAR_BROADCAST;
     sync.seq = tick;
     sync.sync.poll = MAR_BROADCAST;
+    return sync;
+}
+
+/* Serial: SYNC, then the setpoints in as few SETPOINT frames as fit. */
+static long encode_serial(mar_sink *s, uint32_t tick, uint8_t *buf, size_t cap)
+{
+    mar_msg sync = sync_message(tick);
     long a = mar_encode_frame(&sync, buf, cap);
     if (a < 0)
         return a;
@@ -25,12 +32,7 @@ static long encode_serial(mar_sink *s, uint32_t tick, uint8_t *buf, size_t cap)
 /* CAN: SYNC, then the setpoint PDOs, as struct can_frame records. */
 static long encode_can(mar_sink *s, uint32_t tick, uint8_t *buf, size_t cap)
 {
-    mar_msg sync;
-    memset(&sync, 0, sizeof sync);
-    sync.type = MAR_MSG_SYNC;
-    sync.node = MAR_BROADCAST;
-    sync.seq = tick;
-    sync.sync.poll = MAR_BROADCAST;
+    mar_msg sync = sync_message(tick);
     long a = mar_can_encode(&sync, s->can, 1);
     if (a < 0)
         return a;

@@ -3,39 +3,11 @@
 #include <float.h>
 #include <string.h>
 
+#include "mar_bytes.h"
+
 #include "mar_crc.h"
 
 _Static_assert(sizeof(float) == 4, "LOUDNESS carries an IEEE 754 binary32");
-
-static void put16(uint8_t *p, uint16_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-}
-
-static void put32(uint8_t *p, uint32_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-    p[2] = (uint8_t)(v >> 16);
-    p[3] = (uint8_t)(v >> 24);
-}
-
-static uint16_t get16(const uint8_t *p)
-{
-    return (uint16_t)((unsigned)p[0] | (unsigned)p[1] << 8);   /* no int overflow where int is 16 bits */
-}
-
-static uint32_t get32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
-/* Two's complement without implementation-defined conversions. */
-static int32_t as_int32(uint32_t u)
-{
-    return u <= 0x7FFFFFFFu ? (int32_t)u : (int32_t)(u - 0x80000000u) - INT32_MAX - 1;
-}
 
 static int loudness_ok(float v)
 {
@@ -78,7 +50,7 @@ static long encode_payload(const mar_msg *m, uint8_t *p)
             p[len + 2] = (uint8_t)k;
             len += 3;
             for (size_t j = 0; j < k; j++, len += 4)
-                put32(p + len, (uint32_t)e[i + j].counts);
+                mar_put32(p + len, (uint32_t)e[i + j].counts);
             i += k;
         }
         return (long)len;
@@ -92,16 +64,16 @@ static long encode_payload(const mar_msg *m, uint8_t *p)
             return MAR_E_VALUE;
         if (n > MAR_CONFIG_MAX)
             return MAR_E_RANGE;
-        put32(p, m->config.tick_period_us);
-        put16(p + 4, m->config.watchdog_ticks);
+        mar_put32(p, m->config.tick_period_us);
+        mar_put16(p + 4, m->config.watchdog_ticks);
         for (size_t i = 0; i < n; i++) {
             const mar_channel_config *c = &m->config.channel[i];
             uint8_t *q = p + 6 + 17 * i;
             q[0] = c->channel;
-            put32(q + 1, (uint32_t)c->min_counts);
-            put32(q + 5, (uint32_t)c->max_counts);
-            put32(q + 9, c->max_speed);
-            put32(q + 13, c->max_accel);
+            mar_put32(q + 1, (uint32_t)c->min_counts);
+            mar_put32(q + 5, (uint32_t)c->max_counts);
+            mar_put32(q + 9, c->max_speed);
+            mar_put32(q + 13, c->max_accel);
         }
         return (long)(6 + 17 * n);
     }
@@ -114,10 +86,10 @@ static long encode_payload(const mar_msg *m, uint8_t *p)
             return MAR_E_RANGE;
         p[0] = m->status.flags;
         p[1] = m->status.state;
-        put16(p + 2, m->status.rejected);
-        put16(p + 4, m->status.seq_gaps);
+        mar_put16(p + 2, m->status.rejected);
+        mar_put16(p + 4, m->status.seq_gaps);
         for (size_t i = 0; i < n; i++)
-            put32(p + 6 + 4 * i, (uint32_t)m->status.position[i]);
+            mar_put32(p + 6 + 4 * i, (uint32_t)m->status.position[i]);
         return (long)(6 + 4 * n);
     }
     case MAR_MSG_HEARTBEAT:
@@ -130,16 +102,16 @@ static long encode_payload(const mar_msg *m, uint8_t *p)
         if (m->node == MAR_BROADCAST || !loudness_ok(m->loudness.value))
             return MAR_E_VALUE;
         memcpy(&bits, &m->loudness.value, 4);
-        put32(p, bits);
+        mar_put32(p, bits);
         return 4;
     }
     case MAR_MSG_NACK:
         if (m->node == MAR_BROADCAST || (m->nack.flags & ~MAR_FLAGS_DEFINED))
             return MAR_E_VALUE;
-        put16(p, m->nack.reason);
+        mar_put16(p, m->nack.reason);
         p[2] = m->nack.flags;
         p[3] = m->nack.ref_type;
-        put32(p + 4, m->nack.ref_seq);
+        mar_put32(p + 4, m->nack.ref_seq);
         return 8;
     default:
         return MAR_E_TYPE;
@@ -158,8 +130,8 @@ long mar_encode_body(const mar_msg *m, uint8_t *body, size_t cap)
     tmp[0] = MAR_PROTO_VERSION;
     tmp[1] = m->type;
     tmp[2] = m->node;
-    put32(tmp + 3, m->seq);
-    put32(tmp + len - MAR_CRC_BYTES, mar_crc32c(tmp, len - MAR_CRC_BYTES));
+    mar_put32(tmp + 3, m->seq);
+    mar_put32(tmp + len - MAR_CRC_BYTES, mar_crc32c(tmp, len - MAR_CRC_BYTES));
     memcpy(body, tmp, len);
     return (long)len;
 }
@@ -192,7 +164,7 @@ static int decode_payload(const uint8_t *p, size_t len, mar_msg *m)
             for (size_t j = 0; j < k; j++, at += 4, n++) {   /* n < 60: the payload is at most 245 bytes */
                 m->setpoint.entry[n].node = node;
                 m->setpoint.entry[n].channel = (uint8_t)(first + j);
-                m->setpoint.entry[n].counts = as_int32(get32(p + at));
+                m->setpoint.entry[n].counts = mar_as_int32(mar_get32(p + at));
             }
         }
         m->setpoint.n = (uint16_t)n;
@@ -207,17 +179,17 @@ static int decode_payload(const uint8_t *p, size_t len, mar_msg *m)
         if (m->node == MAR_BROADCAST)
             return MAR_E_VALUE;
         size_t n = (len - 6) / 17;
-        m->config.tick_period_us = get32(p);
-        m->config.watchdog_ticks = get16(p + 4);
+        m->config.tick_period_us = mar_get32(p);
+        m->config.watchdog_ticks = mar_get16(p + 4);
         m->config.n = (uint8_t)n;
         for (size_t i = 0; i < n; i++) {
             const uint8_t *q = p + 6 + 17 * i;
             mar_channel_config *c = &m->config.channel[i];
             c->channel = q[0];
-            c->min_counts = as_int32(get32(q + 1));
-            c->max_counts = as_int32(get32(q + 5));
-            c->max_speed = get32(q + 9);
-            c->max_accel = get32(q + 13);
+            c->min_counts = mar_as_int32(mar_get32(q + 1));
+            c->max_counts = mar_as_int32(mar_get32(q + 5));
+            c->max_speed = mar_get32(q + 9);
+            c->max_accel = mar_get32(q + 13);
         }
         return 0;
     }
@@ -229,11 +201,11 @@ static int decode_payload(const uint8_t *p, size_t len, mar_msg *m)
         size_t n = (len - 6) / 4;
         m->status.flags = p[0];
         m->status.state = p[1];
-        m->status.rejected = get16(p + 2);
-        m->status.seq_gaps = get16(p + 4);
+        m->status.rejected = mar_get16(p + 2);
+        m->status.seq_gaps = mar_get16(p + 4);
         m->status.n = (uint8_t)n;
         for (size_t i = 0; i < n; i++)
-            m->status.position[i] = as_int32(get32(p + 6 + 4 * i));
+            m->status.position[i] = mar_as_int32(mar_get32(p + 6 + 4 * i));
         return 0;
     }
     case MAR_MSG_HEARTBEAT:
@@ -246,7 +218,7 @@ static int decode_payload(const uint8_t *p, size_t len, mar_msg *m)
     case MAR_MSG_LOUDNESS: {
         if (len != 4)
             return MAR_E_LENGTH;
-        uint32_t bits = get32(p);
+        uint32_t bits = mar_get32(p);
         float v;
         memcpy(&v, &bits, 4);
         if (m->node == MAR_BROADCAST || !loudness_ok(v))
@@ -259,10 +231,10 @@ static int decode_payload(const uint8_t *p, size_t len, mar_msg *m)
             return MAR_E_LENGTH;
         if (m->node == MAR_BROADCAST || (p[2] & ~MAR_FLAGS_DEFINED))
             return MAR_E_VALUE;
-        m->nack.reason = get16(p);
+        m->nack.reason = mar_get16(p);
         m->nack.flags = p[2];
         m->nack.ref_type = p[3];
-        m->nack.ref_seq = get32(p + 4);
+        m->nack.ref_seq = mar_get32(p + 4);
         return 0;
     default:
         return MAR_E_TYPE;
@@ -275,11 +247,11 @@ int mar_decode_body(const uint8_t *body, size_t len, mar_msg *m)
         return MAR_E_SHORT;
     if (len > MAR_FRAME_MAX)
         return MAR_E_TOOLONG;
-    if (get32(body + len - MAR_CRC_BYTES) != mar_crc32c(body, len - MAR_CRC_BYTES))
+    if (mar_get32(body + len - MAR_CRC_BYTES) != mar_crc32c(body, len - MAR_CRC_BYTES))
         return MAR_E_CRC;
     m->type = body[1];
     m->node = body[2];
-    m->seq = get32(body + 3);
+    m->seq = mar_get32(body + 3);
     if (body[0] != MAR_PROTO_VERSION)
         return MAR_E_VERSION;
     return decode_payload(body + MAR_HEADER_BYTES, len - MAR_HEADER_BYTES - MAR_CRC_BYTES, m);
@@ -325,7 +297,7 @@ int mar_decode_frame(const uint8_t *wire, size_t len, mar_msg *m)
 static long flush_setpoints(uint8_t *body, size_t plen, uint8_t *wire, size_t cap)
 {
     size_t len = MAR_HEADER_BYTES + plen + MAR_CRC_BYTES;
-    put32(body + len - MAR_CRC_BYTES, mar_crc32c(body, len - MAR_CRC_BYTES));
+    mar_put32(body + len - MAR_CRC_BYTES, mar_crc32c(body, len - MAR_CRC_BYTES));
     return cobs_out(body, len, wire, cap);
 }
 
@@ -339,7 +311,7 @@ long mar_encode_setpoints(uint32_t tick, const mar_setpoint_entry *entries, size
     body[0] = MAR_PROTO_VERSION;
     body[1] = MAR_MSG_SETPOINT;
     body[2] = MAR_BROADCAST;
-    put32(body + 3, tick);
+    mar_put32(body + 3, tick);
     for (size_t i = 0; i < n; i++) {
         const mar_setpoint_entry *e = &entries[i];
         if (e->node == MAR_BROADCAST)
@@ -363,7 +335,7 @@ long mar_encode_setpoints(uint32_t tick, const mar_setpoint_entry *entries, size
             open = 1;
         }
         p[group + 2]++;
-        put32(p + plen, (uint32_t)e->counts);
+        mar_put32(p + plen, (uint32_t)e->counts);
         plen += 4;
     }
     if (plen > 0) {

@@ -3,32 +3,7 @@
 #include <float.h>
 #include <string.h>
 
-static void put16(uint8_t *p, uint16_t v)
-{
-    p[0] = (uint8_t)v;
-    p[1] = (uint8_t)(v >> 8);
-}
-
-static void put32(uint8_t *p, uint32_t v)
-{
-    for (int i = 0; i < 4; i++)
-        p[i] = (uint8_t)(v >> (8 * i));
-}
-
-static uint16_t get16(const uint8_t *p)
-{
-    return (uint16_t)((unsigned)p[0] | (unsigned)p[1] << 8);   /* no int overflow where int is 16 bits */
-}
-
-static uint32_t get32(const uint8_t *p)
-{
-    return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
-}
-
-static int32_t as_int32(uint32_t u)
-{
-    return u <= 0x7FFFFFFFu ? (int32_t)u : (int32_t)(u - 0x80000000u) - INT32_MAX - 1;
-}
+#include "mar_bytes.h"
 
 static int node_ok(uint8_t node)
 {
@@ -153,11 +128,11 @@ long mar_can_encode(const mar_msg *m, mar_can_frame *out, size_t cap)
         frame(&out[k], id, 8);
         out[k].data[0] = MAR_CAN_PARAM_BEGIN;
         out[k].data[1] = 0xFF;
-        put32(out[k++].data + 4, m->config.tick_period_us);
+        mar_put32(out[k++].data + 4, m->config.tick_period_us);
         frame(&out[k], id, 8);
         out[k].data[0] = MAR_CAN_PARAM_WATCHDOG;
         out[k].data[1] = 0xFF;
-        put32(out[k++].data + 4, m->config.watchdog_ticks);
+        mar_put32(out[k++].data + 4, m->config.watchdog_ticks);
         for (size_t i = 0; i < n; i++) {
             const mar_channel_config *c = &m->config.channel[i];
             uint32_t value[4] = { (uint32_t)c->min_counts, (uint32_t)c->max_counts, c->max_speed,
@@ -171,13 +146,13 @@ long mar_can_encode(const mar_msg *m, mar_can_frame *out, size_t cap)
                 frame(&out[k], id, 8);
                 out[k].data[0] = (uint8_t)(MAR_CAN_PARAM_MIN + p);
                 out[k].data[1] = c->channel;
-                put32(out[k++].data + 4, value[p]);
+                mar_put32(out[k++].data + 4, value[p]);
             }
         }
         frame(&out[k], id, 8);
         out[k].data[0] = MAR_CAN_PARAM_APPLY;
         out[k].data[1] = (uint8_t)n;
-        put32(out[k++].data + 4, m->seq);
+        mar_put32(out[k++].data + 4, m->seq);
         return (long)k;
     }
     case MAR_MSG_STATUS: {
@@ -193,8 +168,8 @@ long mar_can_encode(const mar_msg *m, mar_can_frame *out, size_t cap)
         out->data[1] = m->status.flags;
         out->data[2] = m->status.state;
         out->data[3] = (uint8_t)n;
-        put16(out->data + 4, m->status.rejected);
-        put16(out->data + 6, m->status.seq_gaps);
+        mar_put16(out->data + 4, m->status.rejected);
+        mar_put16(out->data + 6, m->status.seq_gaps);
         for (size_t pdo = 0; 3 * pdo < n; pdo++) {
             int32_t v[3];
             for (size_t k = 0; k < 3; k++)
@@ -216,18 +191,18 @@ long mar_can_encode(const mar_msg *m, mar_can_frame *out, size_t cap)
             return MAR_E_VALUE;
         memcpy(&bits, &v, 4);
         frame(out, (uint16_t)(MAR_CAN_LOUDNESS + m->node), 8);
-        put32(out->data, m->seq);
-        put32(out->data + 4, bits);
+        mar_put32(out->data, m->seq);
+        mar_put32(out->data + 4, bits);
         return 1;
     }
     case MAR_MSG_NACK:
         if (!node_ok(m->node) || (m->nack.flags & ~MAR_FLAGS_DEFINED))
             return MAR_E_VALUE;
         frame(out, (uint16_t)(MAR_CAN_EMCY + m->node), 8);
-        put16(out->data, m->nack.reason);
+        mar_put16(out->data, m->nack.reason);
         out->data[2] = m->nack.flags;
         out->data[3] = m->nack.ref_type;
-        put32(out->data + 4, m->nack.ref_seq);
+        mar_put32(out->data + 4, m->nack.ref_seq);
         return 1;
     default:
         return MAR_E_TYPE;
@@ -276,7 +251,7 @@ static void join_counter(mar_can_join *j, uint8_t counter)
 static int feed_config(mar_can_rx *rx, uint8_t node, const uint8_t *d, mar_msg *m)
 {
     uint8_t param = d[0], channel = d[1];
-    uint32_t value = get32(d + 4);
+    uint32_t value = mar_get32(d + 4);
     if (d[2] != 0 || d[3] != 0)
         return MAR_E_VALUE;
     if (param == MAR_CAN_PARAM_BEGIN) {
@@ -328,8 +303,8 @@ static int feed_config(mar_can_rx *rx, uint8_t node, const uint8_t *d, mar_msg *
     }
     mar_channel_config *c = &rx->config.config.channel[i];
     switch (param) {
-    case MAR_CAN_PARAM_MIN: c->min_counts = as_int32(value); break;
-    case MAR_CAN_PARAM_MAX: c->max_counts = as_int32(value); break;
+    case MAR_CAN_PARAM_MIN: c->min_counts = mar_as_int32(value); break;
+    case MAR_CAN_PARAM_MAX: c->max_counts = mar_as_int32(value); break;
     case MAR_CAN_PARAM_SPEED: c->max_speed = value; break;
     default: c->max_accel = value; break;
     }
@@ -387,10 +362,10 @@ int mar_can_rx_feed(mar_can_rx *rx, const mar_can_frame *f, mar_msg *m)
         if (d[2] & ~MAR_FLAGS_DEFINED)
             return MAR_E_VALUE;
         m->type = MAR_MSG_NACK;
-        m->nack.reason = get16(d);
+        m->nack.reason = mar_get16(d);
         m->nack.flags = d[2];
         m->nack.ref_type = d[3];
-        m->nack.ref_seq = get32(d + 4);
+        m->nack.ref_seq = mar_get32(d + 4);
         return 1;
     case MAR_CAN_HEARTBEAT:
         if (!state_ok(d[0]))
@@ -399,13 +374,13 @@ int mar_can_rx_feed(mar_can_rx *rx, const mar_can_frame *f, mar_msg *m)
         m->heartbeat.state = d[0];
         return 1;
     case MAR_CAN_LOUDNESS: {
-        uint32_t bits = get32(d + 4);
+        uint32_t bits = mar_get32(d + 4);
         float v;
         memcpy(&v, &bits, 4);
         if (!(v >= 0.0f && v <= FLT_MAX))
             return MAR_E_VALUE;
         m->type = MAR_MSG_LOUDNESS;
-        m->seq = get32(d);
+        m->seq = mar_get32(d);
         m->loudness.value = v;
         return 1;
     }
@@ -421,8 +396,8 @@ int mar_can_rx_feed(mar_can_rx *rx, const mar_can_frame *f, mar_msg *m)
         j->flags = d[1];
         j->state = d[2];
         j->n = d[3];
-        j->rejected = get16(d + 4);
-        j->seq_gaps = get16(d + 6);
+        j->rejected = mar_get16(d + 4);
+        j->seq_gaps = mar_get16(d + 6);
         for (size_t k = 0; k < MAR_CAN_CHANNELS; k++)   /* PDOs held must agree with n */
             if ((j->parts >> (1 + k / 3)) & 1u) {
                 int32_t v = j->position[k];

@@ -1,8 +1,8 @@
 """The ``marionette`` command.
 
-    marionette play [SHOW] [--config FIGURE.toml] [--realtime] ...
-    marionette check [--config FIGURE.toml] [SHOW]
-    marionette bench tick|jitter [...]
+    marionette play [SHOW] [--config FIGURE.toml] [--realtime] [--link ...] [--music ...]
+    marionette check | shape | calibrate | teach | plot | sim | sync-sim ...
+    marionette bench tick|jitter|moves|fuzz|link|sync [...]
 """
 from __future__ import annotations
 
@@ -223,13 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(run=cmd_shape)
 
     for name in COMMAND_MODULES:
-        try:
-            module = importlib.import_module(f"marionette.cmd_{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"marionette.cmd_{name}":
-                raise
-            continue
-        module.register(sub)
+        importlib.import_module(f"marionette.cmd_{name}").register(sub)
 
     p = sub.add_parser("bench", help="benchmarks: " + ", ".join(BENCHES), add_help=False)
     p.add_argument("bench", choices=BENCHES)
