@@ -7,8 +7,9 @@
 
 #include "mar_time.h"
 
-#define LIVE_BACKLOG 4              /* live frames kept waiting for the follower [frames] */
-#define MAX_CATCH_UP 50             /* follower steps made up after an overrun [ticks] */
+#define FOLLOW_FRAMES_PER_TICK 8    /* live frames the follower takes in one tick, at most */
+#define FRAME_TIMEOUT 5             /* ticks without a live frame before the follower steps without */
+#define MAX_CATCH_UP 50             /* such steps in one tick, at most (after a long overrun) */
 
 struct mar_engine {
     mar_engine_options opt;
@@ -26,8 +27,7 @@ struct mar_engine {
     double position;                /* p [show ticks] */
     double rate;                    /* r [show ticks per tick] */
     double live_loudness;           /* newest live frame taken, NaN before the first */
-    double live_fifo[LIVE_BACKLOG]; /* frames waiting, oldest first (follower only) */
-    size_t live_queued;
+    int64_t ticks_since_frame;      /* ticks since the follower's last live frame */
     mar_follow *follow;             /* NULL: the rate drives the playback clock */
     mar_follow_out follow_out;
     int64_t tick;
@@ -52,7 +52,7 @@ struct mar_engine {
     _Atomic double seek_request;
     _Atomic int seek_pending;
 
-    _Atomic uint64_t ticks, overruns, limited, bad_input, live_skipped;
+    _Atomic uint64_t ticks, overruns, limited, bad_input;
     _Atomic uint32_t node_alarms;
     _Atomic int running;            /* real-time loop owns the tick */
 
@@ -189,49 +189,47 @@ void mar_engine_destroy(mar_engine *e)
     free(e);
 }
 
-/* The live loudness frame of this tick, NaN when none came. Without a
- * follower: the newest, older ones are dropped. With one: the oldest
- * waiting, so a burst of frames (audio arrives in blocks) is spread over
- * the next ticks; beyond LIVE_BACKLOG waiting, the oldest are skipped. */
-static double take_live_loudness(mar_engine *e)
+/* Without a follower: the newest live loudness frame, NaN when none
+ * came; older ones are dropped. */
+static double newest_live_loudness(mar_engine *e)
 {
-    double frames[16];
+    double frames[16], newest = NAN;
     size_t n;
-    if (!e->follow) {
-        double newest = NAN;
-        while ((n = mar_ring_pop(&e->loudness_in, frames, 16)) > 0)
-            newest = frames[n - 1];
-        return newest;
-    }
-    while ((n = mar_ring_pop(&e->loudness_in, frames, 16)) > 0) {
-        for (size_t i = 0; i < n; i++) {
-            if (e->live_queued == LIVE_BACKLOG) {
-                memmove(e->live_fifo, e->live_fifo + 1, (LIVE_BACKLOG - 1) * sizeof(double));
-                e->live_queued--;
-                atomic_fetch_add_explicit(&e->live_skipped, 1, memory_order_relaxed);
-            }
-            e->live_fifo[e->live_queued++] = frames[i];
-        }
-    }
-    if (e->live_queued == 0)
-        return NAN;
-    double oldest = e->live_fifo[0];
-    memmove(e->live_fifo, e->live_fifo + 1, (LIVE_BACKLOG - 1) * sizeof(double));
-    e->live_queued--;
-    return oldest;
+    while ((n = mar_ring_pop(&e->loudness_in, frames, 16)) > 0)
+        newest = frames[n - 1];
+    return newest;
 }
 
-/* The playback clock from the live music: one follower step per elapsed
- * period (missed ones without a frame), a seek as a known start. */
-static void follow_music(mar_engine *e, double frame, int64_t elapsed_periods, int seek, double seek_to)
+/* The playback clock from the live music. The follower steps once per live
+ * frame, whenever frames come (audio arrives in blocks; a node's LOUDNESS
+ * rides on its answer): up to FOLLOW_FRAMES_PER_TICK per tick, the rest wait
+ * for the next tick, so a burst drains instead of adding latency. Between
+ * frames the position runs on at the follower's rate. When no frame has come
+ * for FRAME_TIMEOUT ticks the source is gone: the follower steps without a
+ * frame every tick (its flywheel, then its pause detection). Returns the
+ * newest frame taken, NaN if none. */
+static double follow_music(mar_engine *e, int64_t elapsed_periods, int seek, double seek_to)
 {
+    double frames[FOLLOW_FRAMES_PER_TICK], newest = NAN;
     if (seek)
         mar_follow_reset(e->follow, seek_to);
-    for (int64_t k = 1; k < elapsed_periods && k <= MAX_CATCH_UP; k++)
-        mar_follow_step(e->follow, NAN, &e->follow_out);
-    mar_follow_step(e->follow, frame, &e->follow_out);
-    e->position = e->follow_out.position;
+    size_t n = mar_ring_pop(&e->loudness_in, frames, FOLLOW_FRAMES_PER_TICK);
+    for (size_t i = 0; i < n; i++)
+        mar_follow_step(e->follow, frames[i], &e->follow_out);
+    if (n > 0) {
+        newest = frames[n - 1];
+        e->ticks_since_frame = 0;
+    } else {
+        e->ticks_since_frame += elapsed_periods;
+        if (e->ticks_since_frame > FRAME_TIMEOUT) {     /* a step without a frame per tick */
+            for (int64_t k = 0; k < e->ticks_since_frame && k < MAX_CATCH_UP; k++)
+                mar_follow_step(e->follow, NAN, &e->follow_out);
+            e->ticks_since_frame = 0;
+        }
+    }
+    e->position = e->follow_out.position + e->follow_out.rate * (double)e->ticks_since_frame;
     e->rate = e->follow_out.rate;
+    return newest;
 }
 
 static void publish_snapshot(mar_engine *e, const mar_record *rec)
@@ -305,20 +303,21 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     /* 1. playback clock: advance by the rate in force since the last tick,
      *    then take requests. Missed periods still count (real time). The
      *    clock waits while moves or a hold drive the figure. */
-    double frame = take_live_loudness(e);
-    if (!isnan(frame))
-        e->live_loudness = frame;
     int seek = atomic_exchange_explicit(&e->seek_pending, 0, memory_order_acquire);
     double seek_to = atomic_load_explicit(&e->seek_request, memory_order_relaxed);
+    double frame;
     if (e->follow) {            /* the music runs on whatever drives the figure */
-        follow_music(e, frame, elapsed_periods, seek, seek_to);
+        frame = follow_music(e, elapsed_periods, seek, seek_to);
     } else {
+        frame = newest_live_loudness(e);
         if (e->was_playing)
             e->position += e->rate * (double)elapsed_periods;
         e->rate = atomic_load_explicit(&e->rate_request, memory_order_relaxed);
         if (seek)
             e->position = seek_to;
     }
+    if (!isnan(frame))
+        e->live_loudness = frame;
     if (e->position < 0.0)
         e->position = 0.0;
     if (e->position >= last) {
@@ -490,7 +489,7 @@ void mar_engine_counters(const mar_engine *e, mar_counters *c)
     c->limited = atomic_load(&e->limited);
     c->bad_input = atomic_load(&e->bad_input);
     c->records_dropped = e->records.slots ? mar_ring_dropped(&e->records) : 0;
-    c->loudness_dropped = mar_ring_dropped(&e->loudness_in) + atomic_load(&e->live_skipped);
+    c->loudness_dropped = mar_ring_dropped(&e->loudness_in);
     c->sink_frames = atomic_load(&e->sink.frames);
     c->sink_errors = atomic_load(&e->sink.errors);
     c->sink_bytes = atomic_load(&e->sink.bytes);

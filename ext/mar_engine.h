@@ -87,7 +87,7 @@ typedef struct {
     uint64_t limited;           /* axis-ticks where a limit acted */
     uint64_t bad_input;         /* refused non-finite inputs */
     uint64_t records_dropped;   /* flight recorder full */
-    uint64_t loudness_dropped;  /* live loudness frames lost: input full, or a backlog skipped */
+    uint64_t loudness_dropped;  /* live loudness input full */
     uint64_t sink_frames, sink_errors, sink_bytes;
 } mar_counters;
 

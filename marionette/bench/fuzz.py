@@ -38,6 +38,7 @@ import json
 import math
 import subprocess
 import sys
+import tempfile
 
 from marionette.bench._machine import describe, machine_info
 
@@ -105,7 +106,8 @@ def run(frames: int = DEFAULT_FRAMES, seed: int = SEED) -> dict:
     try:
         child = subprocess.run([sys.executable, "-m", "marionette.bench.fuzz", "--worker",
                                 "--frames", str(frames), "--seed", str(seed)],
-                               capture_output=True, text=True, timeout=hang_limit(frames))
+                               capture_output=True, text=True, timeout=hang_limit(frames),
+                               cwd=tempfile.gettempdir())   # the installed package, not a source tree
         if child.returncode != 0:
             failed["crashed"] = True
             failed["error"] = f"exit status {child.returncode}: {child.stderr.strip()[-2000:]}"

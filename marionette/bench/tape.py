@@ -117,7 +117,9 @@ def play(taught: np.ndarray, taught_rate: float, deck: Deck, period: float = FRA
     ticks = int(len(t) / fs / period)
     idx = np.minimum((np.arange(ticks) * period * fs).astype(np.int64), max(0, len(t) - 1))
     truth = tau[idx] if len(t) else np.zeros(0)
-    resumes = [at + dur for at, dur in deck.pauses if at + dur < len(t) / fs]
+    # the tape restarts where a pause ends and no other pause holds it (pauses may overlap)
+    resumes = sorted({at + dur for at, dur in deck.pauses if at + dur < len(t) / fs
+                      and not any(a2 <= at + dur < a2 + d2 for a2, d2 in deck.pauses)})
     jumps = [deck.jump[0]] if deck.jump is not None and deck.jump[0] < len(t) / fs else []
     return Played(samples=y, sample_rate=fs, truth=truth, paused=~moving[idx] if len(t) else
                   np.zeros(0, bool), resumes=resumes, jumps=jumps)
