@@ -130,7 +130,8 @@ class Engine:
         if hasattr(output, "start_receiving"):
             self.supervisor = LinkSupervisor(
                 output, config, self._latest_tick, self._core.set_node_alarms,
-                on_loudness=self._push_node_loudness if follow else None)
+                on_loudness=self._push_node_loudness if follow else None,
+                log_path=None if record in (None, False, True) else f"{record}.nodes.csv")
         self.set_rate(rate)
         self._drain_thread: threading.Thread | None = None
         self._stop_drain = threading.Event()
@@ -248,6 +249,8 @@ class Engine:
 
     def close(self) -> None:
         self.stop()
+        if self.supervisor is not None:
+            self.supervisor.close()
         if self.recorder is not None:
             self.recorder.close()
 

@@ -90,3 +90,11 @@ def test_false_locks_and_resume_times():
     assert m["relock_pause"] == [pytest.approx(0.6)]
     # ticks within 0.5 s after the resume are not in the accuracy figures
     assert len(m["errors"]) == n - 150 - 25
+
+
+def test_overlapping_pauses_restart_the_tape_once():
+    from marionette.bench.tape import Deck, play
+    x = np.sin(np.arange(16000 * 12) * 0.05) * 0.1
+    played = play(x, 16000, Deck(pauses=((1.0, 2.0), (2.5, 3.0)), seconds=8.0))
+    assert played.resumes == [pytest.approx(5.5)]             # not at 3.0: the second pause holds it
+    assert played.paused[int(4.0 / 0.02)] and not played.paused[int(5.6 / 0.02)]

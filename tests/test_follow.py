@@ -134,6 +134,37 @@ def test_finds_an_unknown_start_without_false_locks(piece, stored):
     assert sum(t <= 3.0 for t in times) >= 4, times
 
 
+def test_a_jump_into_alike_music_is_not_taken_for_a_pause(piece, stored):
+    """The tape jumps from the end of a verse to the end of a chorus (the
+    same drums, then the quiet break): the follower must not read the
+    break as a pause and loop through resumes at the old place; it searches
+    and re-locks at the new place, and never locks at a wrong one."""
+    deck = Deck(speed=0.94, wow=0.005, wow_hz=1.0, reverb_s=0.3, snr_db=30.0, sample_rate=22050,
+                start=9.93, jump=(47.7, 71.26), seconds=70.0, seed=3)
+    track, played, err, f = live_track(piece, stored, deck)
+    t = np.arange(len(err)) * T
+    entered = np.flatnonzero((track.state == LOCKED) & (np.concatenate([[-1], track.state[:-1]]) != LOCKED))
+    assert np.all(np.abs(err[entered]) <= 0.2)
+    assert np.all(np.abs(err[(track.state == LOCKED) & (t >= 49.0)]) <= 0.2)
+    assert f.counters()["pauses"] == 0                        # the tape never stopped
+    assert first_lock(track, err, after=47.7) - 47.7 <= 8.0
+    assert np.all(np.abs(err[t >= 58.0]) <= 0.05)
+
+
+def test_resumes_in_time_where_the_music_restarts_quietly(piece, stored):
+    """A pause ending in the quiet outro: the resume is placed where the
+    music rose over the hiss, within 0.5 s of the restart to 50 ms."""
+    deck = Deck(speed=1.06, wow=0.001, wow_hz=0.9, snr_db=20.0, sample_rate=11025, start=37.1,
+                pauses=((69.5, 3.04),), seed=202)
+    track, played, err, f = live_track(piece, stored, deck)
+    t = np.arange(len(err)) * T
+    restart = 69.5 + 3.04
+    ok = np.flatnonzero((np.abs(err) <= 0.05) & (track.state != PAUSED) & (t >= restart))
+    assert len(ok) and t[ok[0]] - restart <= 0.5
+    entered = np.flatnonzero((track.state == LOCKED) & (np.concatenate([[-1], track.state[:-1]]) != LOCKED))
+    assert np.all(np.abs(err[entered]) <= 0.2)
+
+
 def test_known_start_follows_at_once(piece, stored):
     deck = Deck(speed=1.0, snr_db=30.0, start=30.0, seconds=15.0, seed=4)
     track, played, err, f = live_track(piece, stored, deck, start=30.0 / T)

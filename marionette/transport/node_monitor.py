@@ -42,8 +42,13 @@ class NodeState:
 class NodeMonitor:
     """Per-node state for the nodes a figure uses."""
 
-    def __init__(self, nodes: Iterable[int], keep_history: bool = True, on_loudness=None):
+    def __init__(self, nodes: Iterable[int], keep_history: bool = True, on_loudness=None,
+                 log=None):
+        """log: a text file that gets one line per STATUS (docs/formats.md)."""
         self.nodes = {n: NodeState(n) for n in sorted(set(nodes))}
+        self.log = log
+        if log is not None:
+            log.write("time_s,node,tick,flags,state,rejected,seq_gaps,positions\n")
         self.on_loudness = on_loudness                          # called with each LOUDNESS value
         self.keep_history = keep_history
         self.frames_ok = 0
@@ -61,8 +66,14 @@ class NodeMonitor:
     def take(self, message, now: float | None = None) -> None:
         """One message from the nodes."""
         if isinstance(message, protocol.Status):
+            now = time.monotonic() if now is None else now
             self.on_status(message.node, message.tick, message.flags, message.positions, now,
                            message.rejected, message.seq_gaps)
+            with self._lock:
+                if self.log is not None:
+                    self.log.write(f"{now:.6f},{message.node},{message.tick},{message.flags},"
+                                   f"{message.state},{message.rejected},{message.seq_gaps},"
+                                   f"{';'.join(map(str, message.positions))}\n")
         elif isinstance(message, protocol.Heartbeat):
             self.on_heartbeat(message.node, now)
         elif isinstance(message, protocol.Nack):

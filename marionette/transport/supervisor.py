@@ -17,12 +17,16 @@ POLL = 0.004                # how often the supervisor looks at the tick counter
 
 
 class LinkSupervisor:
-    def __init__(self, link, config: FigureConfig, current_tick, set_alarms, on_loudness=None):
+    def __init__(self, link, config: FigureConfig, current_tick, set_alarms, on_loudness=None,
+                 log_path=None):
         """current_tick(): the engine's latest tick number (or None before the first);
-        set_alarms(mask): hands the alarm bits to the C tick."""
+        set_alarms(mask): hands the alarm bits to the C tick; log_path: where
+        every STATUS is written (beside the flight record), or None."""
         self.link = link
         self.config = config
-        self.nodes = NodeMonitor({a.node for a in config.axes}, on_loudness=on_loudness)
+        self._log = open(log_path, "w") if log_path is not None else None
+        self.nodes = NodeMonitor({a.node for a in config.axes}, on_loudness=on_loudness,
+                                 log=self._log)
         # (engine tick, node, evidence tick) of each silent-node report
         self.reports: list[tuple[int, int, int]] = []
         self._current_tick = current_tick
@@ -43,6 +47,17 @@ class LinkSupervisor:
         if self._thread is not None:
             self._thread.join(1.0)
             self._thread = None
+        if self._log is not None:
+            self._log.flush()
+
+    def close(self) -> None:
+        """Stop, and close the status log (the link stays open: it is the caller's)."""
+        self.stop()
+        if self._log is not None:
+            with self.nodes._lock:
+                self._log.close()
+                self.nodes.log = None
+            self._log = None
 
     def check(self) -> None:
         tick = self._current_tick()

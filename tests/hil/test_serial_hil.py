@@ -32,9 +32,9 @@ def expected_positions(config, commands: np.ndarray, times: np.ndarray) -> np.nd
     return out
 
 
-def play(config, show, link, ticks=TICKS, during=None, follow=None):
+def play(config, show, link, ticks=TICKS, during=None, follow=None, record=True):
     """Plays ticks in real time; during(engine) runs while the loop runs."""
-    with Engine(config, show, output=link, record=True, follow=follow) as engine:
+    with Engine(config, show, output=link, record=record, follow=follow) as engine:
         with warnings.catch_warnings():     # without the privilege: normal priority
             warnings.simplefilter("ignore", RuntimeWarning)
             engine.start(priority=PRIORITY, max_ticks=ticks)
@@ -50,9 +50,16 @@ def test_tracking_over_a_pty_matches_the_servo_model(sim, figure, tmp_path):
     s = sim("--serial", "--priority", SIM_PRIORITY, "--trace", trace)
     link = SerialLink(s.ready["serial"])
     show = dance_from_home(figure, TICKS * figure.tick_period, seed=3)
-    records, nodes, reports, stats = play(figure, show, link)
+    flight = tmp_path / "flight.bin"
+    records, nodes, reports, stats = play(figure, show, link, record=flight)
     link.close()
     summary = s.quit()
+    # every STATUS is in the log beside the flight record, as the monitor saw it
+    log = np.genfromtxt(f"{flight}.nodes.csv", delimiter=",", names=True, dtype=None, encoding=None)
+    assert len(log) == sum(st.statuses for st in nodes.nodes.values())
+    last1 = log[log["node"] == 1][-1]
+    assert last1["tick"] == nodes.nodes[1].last_tick
+    assert tuple(map(int, last1["positions"].split(";"))) == nodes.nodes[1].positions
     assert stats["sink_frames"] == TICKS and stats["sink_errors"] == 0
     assert summary["link"]["frames_ok"] == 2 * TICKS and summary["link"]["crc_errors"] == 0
     t = np.load(trace)
