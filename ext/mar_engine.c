@@ -28,6 +28,7 @@ struct mar_engine {
     double rate;                    /* r [show ticks per tick] */
     double live_loudness;           /* newest live frame taken, NaN before the first */
     int64_t ticks_since_frame;      /* ticks since the follower's last live frame */
+    uint32_t follow_flags;          /* MAR_FOLLOW_F_* of this tick's follower steps */
     mar_follow *follow;             /* NULL: the rate drives the playback clock */
     mar_follow_out follow_out;
     int64_t tick;
@@ -214,16 +215,21 @@ static double follow_music(mar_engine *e, int64_t elapsed_periods, int seek, dou
     if (seek)
         mar_follow_reset(e->follow, seek_to);
     size_t n = mar_ring_pop(&e->loudness_in, frames, FOLLOW_FRAMES_PER_TICK);
-    for (size_t i = 0; i < n; i++)
+    e->follow_flags = 0;
+    for (size_t i = 0; i < n; i++) {
         mar_follow_step(e->follow, frames[i], &e->follow_out);
+        e->follow_flags |= e->follow_out.flags;
+    }
     if (n > 0) {
         newest = frames[n - 1];
         e->ticks_since_frame = 0;
     } else {
         e->ticks_since_frame += elapsed_periods;
         if (e->ticks_since_frame > FRAME_TIMEOUT) {     /* a step without a frame per tick */
-            for (int64_t k = 0; k < e->ticks_since_frame && k < MAX_CATCH_UP; k++)
+            for (int64_t k = 0; k < e->ticks_since_frame && k < MAX_CATCH_UP; k++) {
                 mar_follow_step(e->follow, NAN, &e->follow_out);
+                e->follow_flags |= e->follow_out.flags;
+            }
             e->ticks_since_frame = 0;
         }
     }
@@ -253,26 +259,16 @@ static double show_target(const mar_engine *e, size_t j, double p, double r)
     return x + e->feed_forward[j] * slope * r / T;
 }
 
-/* Take a new move request, if one came, and plan every axis's move from
- * its present command and velocity. */
-static void take_request(mar_engine *e)
+/* Plan every axis's move from its present command and velocity: to the
+ * request's pose (GOTO), to the show's pose at blend_position [show ticks]
+ * (BLEND), or to rest (STOP); sync: all arrive together. */
+static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
 {
-    uint32_t s1 = atomic_load_explicit(&e->request_seq, memory_order_acquire);
-    if ((s1 & 1u) || s1 == e->request_seen)
-        return;                                         /* none, or being written: next tick */
-    int kind = atomic_load_explicit(&e->request_kind, memory_order_relaxed);
-    int sync = atomic_load_explicit(&e->request_sync, memory_order_relaxed);
-    memcpy(e->request_copy, e->request_targets, e->n_axes * sizeof(double));
-    atomic_thread_fence(memory_order_acquire);
-    if (atomic_load_explicit(&e->request_seq, memory_order_relaxed) != s1)
-        return;                                         /* overwritten meanwhile: next tick */
-    e->request_seen = s1;
-
     double longest = 0.0;
     for (size_t j = 0; j < e->n_axes; j++) {
         const mar_limits *l = &e->axes[j].limits;
         double x0 = e->cmd[j], v0 = e->vel[j];
-        double target = kind == MAR_REQ_BLEND ? show_target(e, j, e->position, e->rate)
+        double target = kind == MAR_REQ_BLEND ? show_target(e, j, blend_position, e->rate)
                       : kind == MAR_REQ_GOTO ? e->request_copy[j] : NAN;
         if (!isfinite(target))                          /* stop where braking ends */
             target = x0 + v0 * fabs(v0) / (2.0 * l->max_accel);
@@ -292,6 +288,22 @@ static void take_request(mar_engine *e)
     e->move_kind = kind;
     e->move_time = 0.0;
     e->move_duration = longest;
+}
+
+/* Take a new move request, if one came, and plan the moves. */
+static void take_request(mar_engine *e)
+{
+    uint32_t s1 = atomic_load_explicit(&e->request_seq, memory_order_acquire);
+    if ((s1 & 1u) || s1 == e->request_seen)
+        return;                                         /* none, or being written: next tick */
+    int kind = atomic_load_explicit(&e->request_kind, memory_order_relaxed);
+    int sync = atomic_load_explicit(&e->request_sync, memory_order_relaxed);
+    memcpy(e->request_copy, e->request_targets, e->n_axes * sizeof(double));
+    atomic_thread_fence(memory_order_acquire);
+    if (atomic_load_explicit(&e->request_seq, memory_order_relaxed) != s1)
+        return;                                         /* overwritten meanwhile: next tick */
+    e->request_seen = s1;
+    plan_moves(e, kind, sync, e->position);
 }
 
 void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
@@ -330,6 +342,13 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         flags |= MAR_FLAG_BAD_INPUT;
     }
     take_request(e);
+    if (e->follow && (e->follow_flags & MAR_FOLLOW_F_JUMP) && e->mode == MAR_MODE_SHOW) {
+        /* the music's position jumped (lock, re-lock, resume): a timed blend
+         * to where the music will be when the figure arrives, not a slew */
+        plan_moves(e, MAR_REQ_BLEND, 1, e->position);
+        double arrive = e->position + e->rate * e->move_duration / T;
+        plan_moves(e, MAR_REQ_BLEND, 1, arrive < last ? arrive : last);
+    }
     if (e->mode == MAR_MODE_MOVE)
         e->move_time += T * (double)elapsed_periods;
 

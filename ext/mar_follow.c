@@ -95,10 +95,10 @@
 #define DOUBT_DROP 0.25         /* short-run height this far under the long-run one: doubt the place [1] */
 #define PROBATION_BAD 10        /* bad ticks in probation (after a resume) that send the place back to the search */
 #define ONSET_DB 1.5            /* resume: the music began at the first frame of the run this far over the silence [dB] */
-#define ONSET_SIGMAS 4.0
+#define ONSET_SIGMAS 4.0        /* ... or this many of the silence's frame-to-frame deviations */
 #define RESUME_MIN_WINDOW 16    /* fewest live frames for a tracking measurement after a resume [ticks] */
 #define GAP_DB 3.0              /* stored music this far under the silence would not be heard [dB] */
-#define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */        /* ... or this many of the silence's frame-to-frame deviations */
+#define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */
 
 typedef struct {
     double p, r;                /* position now [stored ticks], rate [stored ticks per tick] */
@@ -892,8 +892,8 @@ static cand *lock_choice(mar_follow *f)
             best = e;
     }
     if (getenv("FDEBUG") && f->t % 25 == 0) {
-        for (int i = 0; i < POOL; i++) { cand *e = &f->pool[i]; if (e->used && !isnan(e->fine) && e->fine > 0.3)
-            fprintf(stderr, "t=%llu p=%.0f r=%.3f fine=%.3f co=%.3f conf=%d kap=%.3f fr=%zu%s\n", (unsigned long long)f->t, e->p, e->r, e->fine, e->coarse, e->confirmed, e->kappa, e->frames, e==best?" *":""); }
+        for (int i = 0; i < POOL; i++) { cand *e = &f->pool[i]; if (e->used && !isnan(e->fine) && e->fine > 0.5)
+            fprintf(stderr, "t=%llu p=%.0f r=%.3f fine=%.3f co=%.3f conf=%d kap=%.3f fr=%zu z=%.2f%s\n", (unsigned long long)f->t, e->p, e->r, e->fine, e->coarse, e->confirmed, e->kappa, e->frames, fisher(e->fine), e==best?" *":""); }
         fprintf(stderr, "--\n"); }
     if (!best || best->fine < f->opt.lock_threshold || best->confirmed < LOCK_CONFIRM
         || best->kappa < KAPPA_LOCK_Z * (1.0 - best->fine * best->fine)

@@ -7,6 +7,7 @@ import pytest
 from conftest import make_figure
 from marionette.bench.music import synthesize
 from marionette.bench.tape import Deck, play
+from marionette._core import FLAG_MOVING
 from marionette.engine import Engine
 from marionette.follow import FollowError, sync_ticks
 from marionette.loudness import loudness
@@ -66,6 +67,10 @@ def test_the_music_drives_the_show(taught, mode):
     else:
         assert set(np.unique(steps)) <= {0.0, 1.0, 2.0} and 2.0 in steps
     assert np.all(np.isfinite(r["follow_confidence"]))
+    # the lock is a jump of the position: the figure gets there by a timed
+    # blend (online moves), then plays
+    lock = np.flatnonzero(locked)[0]
+    assert r["flags"][lock] & FLAG_MOVING and not np.any(r["flags"][after] & FLAG_MOVING)
 
 
 def test_following_needs_the_stored_loudness():

@@ -152,13 +152,14 @@ def test_a_jump_into_alike_music_is_not_taken_for_a_pause(piece, stored):
 
 
 def test_resumes_in_time_where_the_music_restarts_quietly(piece, stored):
-    """A pause ending in the quiet outro: the resume is placed where the
-    music rose over the hiss, within 0.5 s of the restart to 50 ms."""
+    """Two pauses, the second ending just before a gap in the music (the
+    last chorus note, then silence, then the outro): the resume is placed
+    where the music rose over the hiss, within 50 ms after at most 0.5 s."""
     deck = Deck(speed=1.06, wow=0.001, wow_hz=0.9, snr_db=20.0, sample_rate=11025, start=37.1,
-                pauses=((69.5, 3.04),), seed=202)
+                pauses=((60.67, 5.82), (69.5, 3.04)), seed=202)
     track, played, err, f = live_track(piece, stored, deck)
     t = np.arange(len(err)) * T
-    restart = 69.5 + 3.04
+    restart = 69.5 + 3.04                                     # the second pause's end
     ok = np.flatnonzero((np.abs(err) <= 0.05) & (track.state != PAUSED) & (t >= restart))
     assert len(ok) and t[ok[0]] - restart <= 0.5
     entered = np.flatnonzero((track.state == LOCKED) & (np.concatenate([[-1], track.state[:-1]]) != LOCKED))
