@@ -1,5 +1,4 @@
 """The C tick through its Python API, in step mode."""
-import errno
 import os
 import tty
 

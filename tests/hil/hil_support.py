@@ -1,70 +1,8 @@
-"""Hardware-in-the-loop support (imported by the tests, fixtures included): `marionette sim` in its own process behind
-a real pty (serial protocol, or an slcan CAN adapter)."""
-import json
-import subprocess
-import sys
-import tempfile
-
+"""Helpers of the hardware-in-the-loop tests (the simulator process and its
+fixture `sim` are in tests/conftest.py)."""
 import numpy as np
-import pytest
 
-from marionette.config import load_config
 from marionette.show import Show
-
-
-class SimProcess:
-    """`marionette sim ARGS` with a pipe to its control stdin."""
-
-    def __init__(self, *args):
-        self.proc = subprocess.Popen([sys.executable, "-m", "marionette.cli", "sim", *map(str, args)],
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True, cwd=tempfile.gettempdir())
-        self.ready = self._line()
-        assert self.ready.get("ready"), self.ready
-
-    def _line(self) -> dict:
-        line = self.proc.stdout.readline()
-        if not line:
-            raise RuntimeError(f"simulator ended: {self.proc.stderr.read()}")
-        return json.loads(line)
-
-    def control(self, command: str) -> dict:
-        self.proc.stdin.write(command + "\n")
-        self.proc.stdin.flush()
-        return self._line()
-
-    def quit(self) -> dict:
-        """Ends the run; returns its summary."""
-        self.proc.stdin.write("quit\n")
-        self.proc.stdin.flush()
-        out, err = self.proc.communicate(timeout=20)
-        assert self.proc.returncode == 0, err
-        return json.loads(out.strip().splitlines()[-1])["summary"]
-
-    def kill(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.communicate()
-
-
-@pytest.fixture
-def sim():
-    """sim(*args) starts a simulator; all are killed at the end of the test."""
-    started = []
-
-    def start(*args):
-        s = SimProcess(*args)
-        started.append(s)
-        return s
-
-    yield start
-    for s in started:
-        s.kill()
-
-
-@pytest.fixture
-def figure():
-    return load_config(None)
 
 
 def dance_from_home(config, seconds: float, seed: int, fraction: float = 0.25) -> Show:

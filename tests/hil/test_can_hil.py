@@ -4,7 +4,7 @@ import time
 
 import numpy as np
 
-from hil_support import dance_from_home, figure, sim  # noqa: F401 (fixtures)
+from hil_support import dance_from_home
 from marionette import protocol
 from marionette.transport.can_link import CanLink
 from test_serial_hil import SIM_PRIORITY, TICKS, expected_positions, play

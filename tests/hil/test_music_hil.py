@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from hil_support import dance_from_home, figure, sim  # noqa: F401 (fixtures)
+from hil_support import dance_from_home
 from marionette.bench.music import synthesize
 from marionette.loudness import wav_loudness, write_wav
 from marionette.show import Show
