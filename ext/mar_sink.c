@@ -6,22 +6,22 @@
 #include <string.h>
 #include <unistd.h>
 
-/* The tick's SYNC: every node answers (poll 0xFF). */
-static mar_msg sync_message(uint32_t tick)
+/* The tick's SYNC: every node answers (poll 0xFF), or the one in turn. */
+static mar_msg sync_message(const mar_sink *s, uint32_t tick)
 {
     mar_msg sync;
     memset(&sync, 0, sizeof sync);
     sync.type = MAR_MSG_SYNC;
     sync.node = MAR_BROADCAST;
     sync.seq = tick;
-    sync.sync.poll = MAR_BROADCAST;
+    sync.sync.poll = s->poll_one && s->n_nodes ? s->nodes[tick % s->n_nodes] : MAR_BROADCAST;
     return sync;
 }
 
 /* Serial: SYNC, then the setpoints in as few SETPOINT frames as fit. */
 static long encode_serial(mar_sink *s, uint32_t tick, uint8_t *buf, size_t cap)
 {
-    mar_msg sync = sync_message(tick);
+    mar_msg sync = sync_message(s, tick);
     long a = mar_encode_frame(&sync, buf, cap);
     if (a < 0)
         return a;
@@ -32,7 +32,7 @@ static long encode_serial(mar_sink *s, uint32_t tick, uint8_t *buf, size_t cap)
 /* CAN: SYNC, then the setpoint PDOs, as struct can_frame records. */
 static long encode_can(mar_sink *s, uint32_t tick, uint8_t *buf, size_t cap)
 {
-    mar_msg sync = sync_message(tick);
+    mar_msg sync = sync_message(s, tick);
     long a = mar_can_encode(&sync, s->can, 1);
     if (a < 0)
         return a;
@@ -98,8 +98,18 @@ int mar_sink_init(mar_sink *s, size_t n_axes, const mar_axis_address *address)
         s->entries[k].node = address[i].node;
         s->entries[k].channel = address[i].channel;
         s->entries[k].counts = 0;
+        if (s->n_nodes == 0 || s->nodes[s->n_nodes - 1] != address[i].node)
+            s->nodes[s->n_nodes++] = address[i].node;
     }
     free(keys);
+    return 0;
+}
+
+int mar_sink_set_poll(mar_sink *s, int one_per_tick)
+{
+    if (one_per_tick && s->protocol != MAR_SINK_SERIAL)
+        return -EINVAL;                 /* a CAN SYNC always polls every node */
+    s->poll_one = one_per_tick != 0;
     return 0;
 }
 
@@ -140,6 +150,8 @@ int mar_sink_set(mar_sink *s, int kind, int fd, size_t ring_slots, int protocol)
     }
     s->protocol = protocol;
     s->encode = protocol == MAR_SINK_CAN ? encode_can : encode_serial;
+    if (protocol == MAR_SINK_CAN)
+        s->poll_one = 0;
     s->fd = fd;
     s->kind = kind;
     return 0;

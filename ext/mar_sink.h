@@ -69,6 +69,9 @@ struct mar_sink {
     mar_can_frame *can;         /* 1 + n_axes, scratch */
     uint8_t *frame;             /* frame_cap bytes, scratch */
     size_t frame_cap;           /* [bytes], enough for either protocol */
+    uint8_t nodes[256];         /* the nodes addressed, ascending */
+    size_t n_nodes;
+    int poll_one;               /* serial: each SYNC polls one node in turn, not every node */
     _Atomic uint64_t frames;    /* ticks emitted in full */
     _Atomic uint64_t errors;    /* ticks lost: short write, full ring, codec error */
     _Atomic uint64_t bytes;     /* bytes handed on */
@@ -78,6 +81,10 @@ struct mar_sink {
 size_t mar_sink_frame_bytes(size_t n_axes);
 
 int mar_sink_init(mar_sink *s, size_t n_axes, const mar_axis_address *address);
+/* Serial only (-EINVAL for CAN): one_per_tick 1 makes each tick's SYNC poll
+ * one node, in turn (a shared line too slow for every node's STATUS every
+ * tick, SPEC.md section 7); 0: every node answers every SYNC. */
+int mar_sink_set_poll(mar_sink *s, int one_per_tick);
 void mar_sink_free(mar_sink *s);
 
 /* Select the destination and the protocol. ring_slots is used for

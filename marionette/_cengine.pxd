@@ -43,6 +43,7 @@ cdef extern from "mar_sink.h" nogil:
         mar_ring ring
         size_t frame_cap
     int mar_sink_set(mar_sink *s, int kind, int fd, size_t ring_slots, int protocol)
+    int mar_sink_set_poll(mar_sink *s, int one_per_tick)
     size_t mar_ring_pop(mar_ring *r, void *dst, size_t max_items)
 
 

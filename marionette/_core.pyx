@@ -184,6 +184,10 @@ cdef class CoreEngine:
         """Where setpoints go (SINK_*) and how they are encoded (PROTOCOL_*); status code."""
         return mar_sink_set(mar_engine_sink(self.engine), kind, fd, ring_slots, protocol)
 
+    def set_poll(self, bint one_per_tick):
+        """Serial: each SYNC polls one node in turn (True) or every node; status code."""
+        return mar_sink_set_poll(mar_engine_sink(self.engine), one_per_tick)
+
     def snapshot(self):
         """(record as a one-element structured array, or None before the first tick)."""
         out = np.zeros(1, dtype=self.record_dtype)

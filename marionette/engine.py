@@ -96,7 +96,7 @@ class Engine:
     def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
                  interpolation: str = "cubic", output=None, protocol: str | None = None,
                  record=None, rate: float = 1.0, on_limits: str = "error", start_pose=None,
-                 follow: str | None = None):
+                 follow: str | None = None, poll: str = "all"):
         if lead not in LEAD_MODES:
             raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
         if interpolation not in INTERPOLATIONS:
@@ -126,10 +126,16 @@ class Engine:
             self.recorder = FlightRecorder(self._core.record_dtype, config.axis_names, path, meta)
         self._writer = None
         self._attach_output(output)
+        if poll not in ("all", "one"):
+            raise ValueError(f"poll must be 'all' or 'one', not {poll!r}")
+        if poll == "one":
+            if self.protocol != "serial":
+                raise ValueError("poll='one' is for a serial line; a CAN SYNC polls every node")
+            _raise_for(self._core.set_poll(True), "poll")
         self.supervisor = None      # the servo nodes' receive path, for a link (marionette.transport)
         if hasattr(output, "start_receiving"):
             self.supervisor = LinkSupervisor(
-                output, config, self._latest_tick, self._core.set_node_alarms,
+                output, config, self._latest_tick, self._core.set_node_alarms, poll == "one",
                 on_loudness=self._push_node_loudness if follow else None,
                 log_path=None if record in (None, False, True) else f"{record}.nodes.csv")
         self.set_rate(rate)

@@ -43,9 +43,11 @@ class NodeMonitor:
     """Per-node state for the nodes a figure uses."""
 
     def __init__(self, nodes: Iterable[int], keep_history: bool = True, on_loudness=None,
-                 log=None):
-        """log: a text file that gets one line per STATUS (docs/formats.md)."""
+                 log=None, poll_interval: int = 1):
+        """log: a text file that gets one line per STATUS (docs/formats.md);
+        poll_interval: ticks between two SYNCs that poll a node [ticks]."""
         self.nodes = {n: NodeState(n) for n in sorted(set(nodes))}
+        self.poll_interval = poll_interval
         self.log = log
         if log is not None:
             log.write("time_s,node,tick,flags,state,rejected,seq_gaps,positions\n")
@@ -128,8 +130,10 @@ class NodeMonitor:
     def check(self, tick: int, now: float | None = None) -> list[tuple[int, int]]:
         """(node, evidence tick) of nodes newly found silent at engine tick `tick`.
 
-        A node is silent when the other nodes have answered SILENT_AFTER_TICKS
-        SYNCs it did not (the evidence tick is the newest answered one): so a
+        A node is silent when it missed SILENT_AFTER_TICKS polls that the
+        other nodes' answers show were sent (the evidence tick is the newest
+        answered one; with one node polled per tick, every poll_interval-th
+        SYNC polls a given node): so a
         receive path that lags under load does not make every node look
         silent. When no node answers for LINK_LOST_TICKS, all are."""
         now = time.monotonic() if now is None else now
@@ -142,7 +146,7 @@ class NodeMonitor:
                 if s.silent:
                     continue
                 newest = -1 if s.last_tick is None else s.last_tick
-                if reference - newest >= SILENT_AFTER_TICKS or link_lost:
+                if (reference - newest) // self.poll_interval >= SILENT_AFTER_TICKS or link_lost:
                     s.silent = True
                     s.silent_events += 1
                     found.append((s.node, max(reference, newest)))

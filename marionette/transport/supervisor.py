@@ -17,16 +17,18 @@ POLL = 0.004                # how often the supervisor looks at the tick counter
 
 
 class LinkSupervisor:
-    def __init__(self, link, config: FigureConfig, current_tick, set_alarms, on_loudness=None,
-                 log_path=None):
+    def __init__(self, link, config: FigureConfig, current_tick, set_alarms,
+                 poll_one: bool = False, on_loudness=None, log_path=None):
         """current_tick(): the engine's latest tick number (or None before the first);
-        set_alarms(mask): hands the alarm bits to the C tick; log_path: where
-        every STATUS is written (beside the flight record), or None."""
+        set_alarms(mask): hands the alarm bits to the C tick; poll_one: each
+        SYNC polls one node in turn; log_path: where every STATUS is written
+        (beside the flight record), or None."""
         self.link = link
         self.config = config
         self._log = open(log_path, "w") if log_path is not None else None
-        self.nodes = NodeMonitor({a.node for a in config.axes}, on_loudness=on_loudness,
-                                 log=self._log)
+        nodes = {a.node for a in config.axes}
+        self.nodes = NodeMonitor(nodes, on_loudness=on_loudness, log=self._log,
+                                 poll_interval=len(nodes) if poll_one else 1)
         # (engine tick, node, evidence tick) of each silent-node report
         self.reports: list[tuple[int, int, int]] = []
         self._current_tick = current_tick

@@ -10,6 +10,7 @@ from marionette import protocol
 from marionette.engine import Engine
 from marionette.sim.servo import ServoModel
 from marionette.transport.node_monitor import SILENT_AFTER_TICKS
+from marionette.transport import open_link
 from marionette.transport.serial_link import SerialLink
 
 TICKS = 250             # 5 s at 20 ms
@@ -31,9 +32,9 @@ def expected_positions(config, commands: np.ndarray, times: np.ndarray) -> np.nd
     return out
 
 
-def play(config, show, link, ticks=TICKS, during=None, follow=None, record=True):
+def play(config, show, link, ticks=TICKS, during=None, follow=None, record=True, poll="all"):
     """Plays ticks in real time; during(engine) runs while the loop runs."""
-    with Engine(config, show, output=link, record=record, follow=follow) as engine:
+    with Engine(config, show, output=link, record=record, follow=follow, poll=poll) as engine:
         with warnings.catch_warnings():     # without the privilege: normal priority
             warnings.simplefilter("ignore", RuntimeWarning)
             engine.start(priority=PRIORITY, max_ticks=ticks)
@@ -221,3 +222,28 @@ def test_estop_latches_and_releases(sim, figure):
         after = ticks > marks["release"] + 20
         assert np.ptp(pos[after], axis=0).max() > 0
     assert not np.any(latched[-5:])
+
+
+def test_one_node_polled_per_tick_on_a_slow_shared_line(sim, figure):
+    """115200 baud cannot carry every node's STATUS every tick (SPEC.md section
+    7): each SYNC polls one node in turn, and silence is judged per poll."""
+    s = sim("--serial", "--priority", SIM_PRIORITY)
+    link = open_link(f"serial:{s.ready['serial']}@115200")     # (a pty does not slow down)
+    show = dance_from_home(figure, TICKS * figure.tick_period, seed=12)
+
+    def silence_node_2(engine):
+        time.sleep(2.5)
+        s.control("silence 2")
+
+    records, nodes, reports, _ = play(figure, show, link, during=silence_node_2, poll="one")
+    link.close()
+    s.quit()
+    order = sorted(nodes.nodes)
+    for n in (1, 3, 4, 5):
+        ticks = np.array([h[1] for h in nodes.nodes[n].history])
+        assert np.all(ticks % len(order) == order.index(n))          # only when polled
+        assert len(ticks) >= TICKS // len(order) - 2
+    assert [n for _, n, _ in reports] == [2]
+    missed = nodes.nodes[2].last_tick + len(order)                  # its first unanswered poll
+    reported_at, _, evidence = reports[0]
+    assert evidence - missed >= 2 * len(order) and reported_at - missed <= 3 * len(order) + 1
