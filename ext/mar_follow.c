@@ -48,7 +48,16 @@
  * live-minus-stored level is tracked), frames far below that, near the
  * floor (or very far below) and steady like hiss, for pause_after ticks:
  * the recorder stopped. The position goes back to where the silence began
- * and holds (rate 0). Two frames clearly above the floor resume it there. */
+ * and holds (rate 0). Two frames clearly above the silence (by a few of its
+ * own frame-to-frame wobbles) resume it there, from the start of the rise;
+ * the resumed place is on probation (HOLDING, search beside) until the
+ * tracker confirms it, and silence or unclear music in that time sends it
+ * to the search: a jump into a quiet passage does not loop through pauses.
+ *
+ * Doubt. A collapse of the tracking peak height (short-run average 0.25
+ * under the long-run one) in clear music means the tape may have jumped to
+ * alike music (the same drums elsewhere): HOLDING, and the search beside
+ * (the tracker's place in its pool) decides by the lock rules. */
 #include "mar_follow.h"
 
 #include <errno.h>
@@ -86,7 +95,20 @@
 #define VERIFIED_BONUS 0.1      /* see cand_rank [1] */
 #define LOCK_CONFIRM 2          /* consecutive small verifications before a lock */
 #define KAPPA_REF 0.05          /* correlation curvature of a clear peak [1/tick^2] */
-#define KAPPA_LOCK 0.05         /* a lock needs peaks at least this sharp in both halves [1/tick^2] */
+#define KAPPA_LOCK_Z 0.08       /* a lock needs peaks at least this sharp in both halves, in Fisher z
+                                 * (curvature / (1 - rho^2): near rho = 1 a slight drop is a clear one) [1/tick^2] */
+#define STEADY_RANGE_DB 3.0     /* a pause's frames stay within this range (hiss), music moves more [dB] */
+#define H_SLOW 0.003            /* tracking peak height: long-run average, per accepted measurement [1] */
+#define H_FAST 0.1              /* ... short-run average, per measured (not quiet) tick [1] */
+#define DOUBT_DROP 0.25         /* short-run height this far under the long-run one: doubt the place [1] */
+#define CLEAR_DB 15.0           /* doubt only where the live music averages this far over the noise floor [dB] */
+#define NEUTRAL_DB 1.0          /* a frame within this of a silent run's level range ... */
+#define PROBATION_BAD 10        /* bad ticks in probation (after a resume) that send the place back to the search */
+#define ONSET_DB 1.5            /* resume: the music began at the first frame of the run this far over the silence [dB] */
+#define ONSET_SIGMAS 4.0        /* ... or this many of the silence's frame-to-frame deviations */
+#define RESUME_MIN_WINDOW 16    /* fewest live frames for a tracking measurement after a resume [ticks] */
+#define GAP_DB 3.0              /* stored music this far under the silence would not be heard [dB] */
+#define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */
 
 typedef struct {
     double p, r;                /* position now [stored ticks], rate [stored ticks per tick] */
@@ -149,6 +171,13 @@ struct mar_follow {
     double resume_db;           /* a frame this far over the pause's level resumes [dB] */
     double pause_db;            /* the level of the silence in a pause [dB] */
     int measured;               /* a measurement was accepted since the last lock or resume */
+    double silent_lo, silent_hi;  /* level range of the current silent run [dB] */
+    double pause_dev;           /* the silence's mean frame-to-frame deviation in a pause [dB] */
+    double h_slow, h_fast;      /* tracking peak heights: long-run, short-run average [1] */
+    int doubt;                  /* the tracking correlation collapsed in music: search beside, keep it going */
+    int probation;              /* resumed from a pause: not LOCKED until the place is confirmed */
+    uint64_t probation_ok;      /* accepted measurements since the resume */
+    uint64_t pause_start;       /* step the pause was detected */
 
     /* search */
     int searching;
@@ -443,6 +472,8 @@ void mar_follow_reset(mar_follow *f, double position)
     f->last_good = f->t;
     f->seg_start = f->t + 1;          /* older frames belong to another stretch of tape */
     f->have_gain = 0;
+    f->doubt = f->probation = 0;
+    f->h_slow = f->h_fast = 0.0;
     stop_search(f);
     if (isfinite(position)) {
         double last = (double)f->n;
@@ -871,7 +902,7 @@ static cand *lock_choice(mar_follow *f)
             best = e;
     }
     if (!best || best->fine < f->opt.lock_threshold || best->confirmed < LOCK_CONFIRM
-        || best->kappa < KAPPA_LOCK
+        || best->kappa < KAPPA_LOCK_Z * (1.0 - best->fine * best->fine)
         || usable(f, best->since, f->opt.lock_window) < f->opt.lock_window)
         return NULL;
     /* a short window proves less: the margin grows as 1/sqrt(frames) below verify_window */
@@ -946,7 +977,7 @@ static double stored_db_at(const mar_follow *f, double x)
  * is expected and "silent" if also near the floor. */
 static int detect_pause(mar_follow *f, int have)
 {
-    if (!have || !f->have_gain || !f->measured || f->state != MAR_FOLLOW_LOCKED)
+    if (!have || !f->have_gain || !f->measured || (f->state != MAR_FOLLOW_LOCKED && !f->probation))
         return 0;                                     /* only when the position is trusted */
     double db = f->ldb[ring(f, f->t)];
     /* the stored frame this live frame should show: centre of the frame */
@@ -955,9 +986,15 @@ static int detect_pause(mar_follow *f, int have)
     double margin = expected - f->nf;                 /* [dB] over the floor */
     if (margin < AUDIBLE_DB || stored < f->s_level - MUSIC_RANGE_DB)
         return 0;                                     /* the music is quiet here: no evidence */
-    if (db >= expected - fmin(LOW_DB, 0.5 * margin))
+    int low = db < expected - fmin(LOW_DB, 0.5 * margin);
+    if (!low && f->silent_run > 0 && db >= f->silent_lo - NEUTRAL_DB && db <= f->silent_hi + NEUTRAL_DB
+        && expected < db + LOW_DB)
+        return 0;                                     /* as quiet as the silence so far, and the music
+                                                       * expected here would hardly stand over it
+                                                       * (between drum hits): no evidence */
+    if (!low)
         f->last_high = f->t;                          /* the music was there, as expected */
-    if (db < expected - fmin(LOW_DB, 0.5 * margin)) {
+    if (low) {
         if (f->low_run == 0)
             f->low_start = f->t;
         f->low_run++;
@@ -965,7 +1002,21 @@ static int detect_pause(mar_follow *f, int have)
         double prev = f->ldb[ring(f, f->t - 1)];
         int steady = !isnan(prev) && fabs(db - prev) <= STEADY_DB;
         int deep = db < f->nf + fmin(NEAR_FLOOR_DB, 0.5 * margin) || db < expected - DEEP_DB;
-        f->silent_run = deep && steady ? f->silent_run + 1 : 0;
+        if (deep && steady) {
+            /* hiss stays within a few dB; a quiet passage of music moves more */
+            if (f->silent_run == 0 || fmax(f->silent_hi, db) - fmin(f->silent_lo, db) > STEADY_RANGE_DB) {
+                f->silent_run = 0;
+                f->silent_lo = f->silent_hi = db;
+            }
+            f->silent_lo = fmin(f->silent_lo, db);
+            f->silent_hi = fmax(f->silent_hi, db);
+            f->silent_run++;
+        } else if (!(steady && f->silent_run > 0 && db >= f->silent_lo - NEUTRAL_DB
+                     && db <= f->silent_hi + NEUTRAL_DB)) {
+            f->silent_run = 0;                        /* (as quiet as the silence so far, where the
+                                                       * music would stand only a little over it:
+                                                       * no evidence) */
+        }
     } else {
         f->low_run = 0;
         f->silent_run = 0;
@@ -1017,14 +1068,22 @@ static void kf_predict(mar_follow *f)
 static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
 {
     size_t ages = usable(f, f->seg_start, f->opt.window);
+    /* right after a resume a short window corrects the restart point early
+     * (the gate and the probation keep it from doing harm) */
+    size_t min_window = f->probation && RESUME_MIN_WINDOW < f->opt.min_window ? RESUME_MIN_WINDOW
+                                                                               : f->opt.min_window;
     *quiet = 0;
-    if (ages < f->opt.min_window)
+    if (ages < min_window) {
+        *quiet = 2;                                   /* too little audio yet: no evidence */
         return 0;
+    }
     long j0;
     double c;
     size_t m = resample(f, f->p, f->r, ages, &j0, &c);
-    if (m < f->opt.min_window / 2)
+    if (m < min_window / 2) {
+        *quiet = 2;
         return 0;
+    }
     double hp0 = f->P00 - c * f->P01, hp1 = f->P01 - c * f->P11;     /* P H' with H = [1, -c] */
     double var = hp0 - c * hp1;                                       /* H P H' [tick^2] */
     double span = ceil(3.0 * sqrt(var > 0.0 ? var : 0.0));
@@ -1037,6 +1096,7 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
         return 0;
     }
     double d = peak(rho, lags, &h, &kappa, &edge);
+    f->h_fast += H_FAST * (h - f->h_fast);
     if (edge || h < f->opt.track_threshold || !(kappa > 0.0))
         return 0;
     double k = kappa / KAPPA_REF;
@@ -1050,6 +1110,7 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
     f->P00 -= k0 * hp0;
     f->P01 -= k0 * hp1;
     f->P11 -= k1 * hp1;
+    f->h_slow += H_SLOW * (h - f->h_slow);
     double qual = (h - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->conf += 0.05 * (qual - f->conf);
     *flags |= MAR_FOLLOW_F_MEASURED;
@@ -1105,6 +1166,8 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->low_run = f->silent_run = 0;
     f->conf = (e->fine - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->measured = 0;
+    f->doubt = f->probation = 0;
+    f->h_slow = f->h_fast = e->fine;
     f->have_gain = 0;
     update_gain(f, f->p, f->r, f->opt.verify_window);
     if (!was_following || fabs(old - f->p) > 2.0)
@@ -1171,9 +1234,12 @@ static void pause_now(mar_follow *f)
     if (oldest < f->seg_start)
         oldest = f->seg_start;
     uint64_t last_loud = f->t;
+    /* "over the floor": clearly over the silence heard now (quiet music may
+     * stand only a few dB over the hiss) */
+    double loud_db = fmin(f->nf + NEAR_FLOOR_DB, f->silent_hi + ONSET_DB);
     while (last_loud > oldest) {
         double db = f->ldb[ring(f, last_loud)];
-        if (!isnan(db) && db >= f->nf + NEAR_FLOOR_DB)
+        if (!isnan(db) && db >= loud_db)
             break;
         last_loud--;
     }
@@ -1183,11 +1249,13 @@ static void pause_now(mar_follow *f)
     double at = f->p;
     if (stop >= 1 && stop - 1 >= oldest && f->t - stop < f->hcap - 1)
         at = f->lpos[ring(f, stop - 1)];
-    f->frozen = at + 0.5 * f->r;
+    f->frozen = at - 0.5 * f->r;
     f->p = f->frozen;
     f->state = MAR_FOLLOW_PAUSED;
     f->loud_run = 0;
     f->pause_db = f->ldb[ring(f, f->t)];              /* a silent frame (detect_pause saw it) */
+    f->pause_dev = 0.5 * (f->silent_hi - f->silent_lo);
+    f->pause_start = f->t;
     /* resume on frames halfway up from the silence to the music expected where it stopped */
     double expected = -INFINITY;
     for (int k = 0; k < 25; k++)
@@ -1203,19 +1271,57 @@ static void pause_now(mar_follow *f)
 static int resume_now(mar_follow *f, int have, uint32_t *flags)
 {
     double db = have ? f->ldb[ring(f, f->t)] : NAN;
-    if (have && db > f->pause_db + f->resume_db) {
+    /* over the silence by resume_db, or by a few of its own wobbles (hiss is steady) */
+    double over = fmin(f->resume_db, fmax(MIN_RESUME_DB, RESUME_SIGMAS * f->pause_dev));
+    if (have && db > f->pause_db + over) {
         f->loud_run++;
     } else {
         f->loud_run = 0;
-        if (have)                                     /* follow the silence's level */
+        if (have) {                                   /* follow the silence's level and its wobble */
+            double prev = f->ldb[ring(f, f->t - 1)];
+            if (!isnan(prev) && f->t > f->pause_start)
+                f->pause_dev += PAUSE_ALPHA * (fabs(db - prev) - f->pause_dev);
             f->pause_db += PAUSE_ALPHA * (db - f->pause_db);
+        }
     }
     if (f->loud_run < 2)
         return 0;
     if (f->opt.mode == MAR_FOLLOW_PAPER)
         f->r = 1.0;
-    f->p = f->frozen + f->r * ((double)f->loud_run - 0.5);
-    f->seg_start = f->t + 1 - f->loud_run;
+    /* the music began where the frames first rose clearly over the silence
+     * (a quiet entry rises slowly): look back from the run */
+    uint64_t onset = f->t + 1 - f->loud_run, limit = f->t > 50 ? f->t - 50 : 0;
+    double rise = fmax(ONSET_DB, ONSET_SIGMAS * f->pause_dev);
+    if (limit < f->pause_start)
+        limit = f->pause_start;
+    while (onset > limit + 1) {
+        double db = f->ldb[ring(f, onset - 1)];
+        if (isnan(db) || !(db > f->pause_db + rise))
+            break;
+        onset--;
+    }
+    double run = (double)(f->t + 1 - onset);
+    /* if the tape restarted in a gap of the music (stored frames that would
+     * be buried under the silence), the onset heard is the first stored
+     * frame after the gap */
+    double from = f->frozen;
+    if (f->have_gain) {
+        long j = (long)floor(f->frozen);
+        for (long k = 0; k < 50; k++) {
+            double x = (double)(j + k);
+            if (stored_db_at(f, x) + f->gain >= f->pause_db - GAP_DB) {
+                if (x > from)
+                    from = x;
+                break;
+            }
+        }
+    }
+    f->p = from + f->r * (run - 0.5);
+    f->seg_start = onset;
+    f->probation = 1;
+    f->probation_ok = 0;
+    f->doubt = 0;
+    f->h_fast = f->h_slow;
     f->state = MAR_FOLLOW_HOLDING;
     f->measured = 0;
     f->last_good = f->t;
@@ -1225,6 +1331,21 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
     f->c.resumes++;
     *flags |= MAR_FOLLOW_F_JUMP;
     return 1;
+}
+
+/* The live music of the last second stands clearly over the noise floor
+ * (on average CLEAR_DB over it): a failing correlation there is not noise
+ * hiding a quiet passage. */
+static int clear_music(const mar_follow *f)
+{
+    double sum = 0.0;
+    size_t cnt = 0, ages = usable(f, f->seg_start, 50);
+    for (size_t i = 0; i < ages; i++) {
+        double db = f->ldb[ring(f, f->t - i)];
+        if (!isnan(db))
+            sum += db, cnt++;
+    }
+    return cnt >= 25 && sum / (double)cnt > f->nf + CLEAR_DB;
 }
 
 /* Following (LOCKED or HOLDING): one measurement, then the state. */
@@ -1241,6 +1362,7 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
     }
     if (ok) {
         f->measured = 1;
+        f->probation_ok++;
         f->c.measurements++;
         f->last_good = f->t;
         f->bad_since = f->quiet_since = 0;
@@ -1253,22 +1375,42 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         f->bad_since++;
         f->conf *= 0.97;
     }
-    if (quiet)
+    if (quiet == 1)
         *flags |= MAR_FOLLOW_F_QUIET;
     double since = (double)(f->t - f->last_good);
+    /* the tracking correlation collapsed while the music is clear: the tape
+     * may have jumped to a place that resembles this one (the same drums):
+     * doubt the place, and let the search (with this place in its pool)
+     * decide; only a lock ends the doubt */
+    if (!f->doubt && f->measured && !quiet && f->h_fast < f->h_slow - DOUBT_DROP && clear_music(f)) {
+        f->doubt = 1;
+        uint64_t back = f->opt.window / 2;
+        start_search(f, f->t + 1 > back ? f->t + 1 - back : 0);
+    }
+    /* after a resume, the place is on probation until the tracker has
+     * confirmed it for lock_window frames; unclear music in that time sends
+     * it back to the search */
+    if (f->probation && f->probation_ok >= f->opt.lock_window / 2 && f->bad_since == 0 && !f->doubt)
+        f->probation = 0;
     /* LOCKED: a measurement confirmed the place since the last (re)start, recently */
-    f->state = since <= f->opt.hold_after && f->measured ? MAR_FOLLOW_LOCKED : MAR_FOLLOW_HOLDING;
+    f->state = since <= f->opt.hold_after && f->measured && !f->doubt && !f->probation
+        ? MAR_FOLLOW_LOCKED : MAR_FOLLOW_HOLDING;
     /* frames from well before the measurements went bad may belong to
      * another place of the tape (a jump): the search starts after them */
     uint64_t bad_start = f->t + 1 - f->bad_since;
     uint64_t from = bad_start > f->opt.min_window ? bad_start - f->opt.min_window : 0;
-    if ((double)f->bad_since >= f->opt.lost_after || since >= f->opt.quiet_lost_after) {
+    if ((double)f->bad_since >= f->opt.lost_after || since >= f->opt.quiet_lost_after
+        || (f->probation && f->bad_since >= PROBATION_BAD)) {
+        uint64_t at = f->probation && f->seg_start > from ? f->seg_start : from;
         f->state = MAR_FOLLOW_SEARCHING;
+        f->probation = f->doubt = 0;
         stop_search(f);
-        start_search(f, from);
+        start_search(f, at);
     } else if ((double)f->bad_since >= f->opt.search_after) {
         start_search(f, from);
-    } else if (ok && f->searching) {
+    } else if (f->probation) {
+        start_search(f, f->seg_start);
+    } else if (ok && f->searching && !f->doubt) {
         stop_search(f);
     }
 }
@@ -1293,8 +1435,19 @@ void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
 
     /* 2. following: pause, else measure */
     if (f->state == MAR_FOLLOW_LOCKED || f->state == MAR_FOLLOW_HOLDING) {
-        if (!resumed && detect_pause(f, have))
-            pause_now(f);
+        if (!resumed && detect_pause(f, have)) {
+            if (f->probation) {
+                /* silence again where the resumed place expects music: the
+                 * place is doubtful; search from here (no position guess) */
+                f->probation = f->doubt = 0;
+                f->state = MAR_FOLLOW_SEARCHING;
+                f->low_run = f->silent_run = 0;
+                stop_search(f);
+                start_search(f, f->t + 1);
+            } else {
+                pause_now(f);
+            }
+        }
         else if (!resumed || f->opt.mode == MAR_FOLLOW_SMOOTH)
             follow(f, have, &flags);
     }
