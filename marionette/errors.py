@@ -19,3 +19,14 @@ class EngineError(MarionetteError, RuntimeError):
 
 class TeachError(MarionetteError, ValueError):
     """Teach-in input (markers, cameras, recording, settings) is invalid or unusable."""
+
+
+class LineError(ValueError):
+    """A line of a text file is malformed; ``path``, ``line`` (1-based) and
+    ``value`` say where."""
+
+    def __init__(self, path, line: int, value: str, message: str):
+        self.path = str(path)
+        self.line = line
+        self.value = value
+        super().__init__(f"{self.path}, line {line}: {message} (value {value!r})")

@@ -28,17 +28,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from marionette.errors import LineError
+
 HEADER = ("camera", "marker", "x", "y", "z", "R", "T")
 
 
-class MarkerError(ValueError):
-    """Malformed marker file; ``path``, ``line`` (1-based) and ``value`` say where."""
-
-    def __init__(self, path, line: int, value: str, message: str):
-        self.path = str(path)
-        self.line = line
-        self.value = value
-        super().__init__(f"{self.path}, line {line}: {message} (value {value!r})")
+class MarkerError(LineError):
+    """Malformed marker file."""
 
 
 @dataclass

@@ -29,18 +29,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from marionette.errors import LineError
+
 HEADER = ("time_s", "camera", "led", "R", "T")
 N_LEDS = 4
 
 
-class RecordingError(ValueError):
-    """Malformed recording; ``path``, ``line`` (1-based) and ``value`` say where."""
-
-    def __init__(self, path, line: int, value: str, message: str):
-        self.path = str(path)
-        self.line = line
-        self.value = value
-        super().__init__(f"{self.path}, line {line}: {message} (value {value!r})")
+class RecordingError(LineError):
+    """Malformed recording."""
 
 
 @dataclass
