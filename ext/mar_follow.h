@@ -61,7 +61,7 @@ enum mar_follow_state {
 typedef struct {
     int mode;                   /* enum mar_follow_mode */
     double rate_min, rate_max;  /* playback rate limits [stored ticks per tick], 0 < min <= 1 <= max */
-    double delay;               /* age of the newest frame at the step [ticks]: output = p + r * delay */
+    double delay;               /* from the end of the newest frame's audio to the step [ticks]: output = p + r * delay */
     double range_db;            /* loudness kept below a running peak level [dB]; quieter reads as that */
     size_t window;              /* tracking correlation window [ticks] */
     size_t min_window;          /* fewest live frames for a tracking measurement [ticks] */

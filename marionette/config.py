@@ -62,7 +62,7 @@ class FollowConfig:
     mode: str = "smooth"            # "smooth" (fractional rate) or "paper" (double or skip a sample)
     rate_min: float = 0.90          # slowest playback rate [1]
     rate_max: float = 1.10          # fastest playback rate [1]
-    latency: float = 0.0            # age of the newest loudness frame when the tick runs [s]
+    latency: float = 0.0            # from the end of the newest loudness frame's audio to the tick [s]
     window: float = 4.0             # tracking correlation window [s]
     lock_threshold: float = 0.6     # correlation a place needs to lock [1]
     lock_margin: float = 0.3        # its lead over any other place [Fisher z]

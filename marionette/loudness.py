@@ -70,7 +70,11 @@ class LoudnessMeter:
         keep = int(np.floor(k * self.sample_rate * self.period)) - self._consumed
         self._pending = self._pending[keep:]
         self._consumed += keep
-        spectrum = np.fft.rfft(frames, axis=1)
+        return self.frame_loudness(frames)
+
+    def frame_loudness(self, frames) -> np.ndarray:
+        """Loudness of frames (rows of frame_len samples) [full scale]."""
+        spectrum = np.fft.rfft(np.atleast_2d(frames), axis=1)
         # Parseval: mean square of the band = 2 * sum |X|^2 / N^2 (one-sided spectrum)
         power = 2.0 * np.sum(np.abs(spectrum[:, self._band]) ** 2, axis=1) / self.frame_len ** 2
         return np.sqrt(power * 2.0)      # full-scale sine (mean square 1/2) -> 1.0

@@ -13,6 +13,7 @@ import numpy as np
 
 from marionette import protocol
 from marionette.config import FigureConfig
+from marionette.loudness import LoudnessMeter
 from marionette.sim.faults import Faults
 from marionette.sim.node import DEFAULT_WATCHDOG_TICKS, SimNode
 
@@ -20,9 +21,10 @@ from marionette.sim.node import DEFAULT_WATCHDOG_TICKS, SimNode
 class SimFigure:
     def __init__(self, config: FigureConfig, faults: Faults | None = None,
                  watchdog_ticks: int = DEFAULT_WATCHDOG_TICKS, trace: bool = False,
-                 music: np.ndarray | None = None, music_node: int | None = None):
-        """music: loudness frames (one per tick period, from model time 0) that
-        node music_node measures and reports in LOUDNESS messages."""
+                 music: tuple[np.ndarray, float] | None = None, music_node: int | None = None):
+        """music: (samples, sample rate [Hz]) of a recording that plays from
+        model time 0; node music_node measures it and answers each SYNC with
+        a LOUDNESS of the tick period just before that SYNC."""
         self.config = config
         self.faults = faults or Faults()
         by_node = defaultdict(list)
@@ -33,7 +35,12 @@ class SimFigure:
         # where each figure axis lives: (node, index on that node)
         self._where = [(a.node, self.nodes[a.node].channels.index(a.channel)) for a in config.axes]
         self.messages = 0                   # messages taken
-        self.music = None if music is None else np.asarray(music, dtype=float)
+        self.music = None
+        if music is not None:
+            samples, rate = music
+            samples = np.asarray(samples, dtype=float)                # [full scale]
+            self.music = samples.mean(axis=1) if samples.ndim == 2 else samples
+            self._meter = LoudnessMeter(rate, config.tick_period)
         self.music_node = music_node
         self._music_sent = 0                # LOUDNESS frames sent
         self.trace = [] if trace else None  # (time [s], tick, positions [unit] in figure order)
@@ -93,12 +100,23 @@ class SimFigure:
             if sync.poll in (protocol.BROADCAST, sim.node):
                 answers += sim.answer(sync.tick, rejected, self.faults.noise(len(sim.channels)))
         if self.music is not None and self.music_node not in self.faults.silent:
-            period = self.config.tick_period
-            while self._music_sent < len(self.music) and (self._music_sent + 1) * period <= t:
-                answers.append(protocol.Loudness(self.music_node, self._music_sent,
-                                                 float(self.music[self._music_sent])))
+            value = self._loudness_before(t)
+            if value is not None:
+                answers.append(protocol.Loudness(self.music_node, self._music_sent, value))
                 self._music_sent += 1
         return answers
+
+    def _loudness_before(self, t: float) -> float | None:
+        """Loudness of the music in the tick period before model time t [s]
+        [full scale]; None before the music has played a whole period or
+        after its end. Measured at the SYNC so that its age at the host is
+        fixed (one period plus the answer's way), whatever the phase between
+        the host's ticks and the start of the music."""
+        rate, n = self._meter.sample_rate, self._meter.frame_len
+        start = int(np.floor((t - self.config.tick_period) * rate))     # [samples]
+        if start < 0 or start + n > len(self.music):
+            return None
+        return float(self._meter.frame_loudness(self.music[start:start + n])[0])
 
     def trace_arrays(self) -> dict:
         """The trace as arrays: time [s], tick, positions [unit] (ticks x axes)."""

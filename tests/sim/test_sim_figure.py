@@ -6,6 +6,7 @@ import pytest
 
 from marionette import protocol
 from marionette.config import load_config
+from marionette.loudness import LoudnessMeter
 from marionette.sim.faults import Faults
 from marionette.sim.figure import SimFigure
 
@@ -136,3 +137,32 @@ def test_a_silenced_node_neither_listens_nor_answers(figure):
     assert sorted(s.node for s in statuses(tick(sim, figure, 1))) == [1, 3, 4, 5]
     faults.apply("resume 2")
     assert sorted(s.node for s in statuses(tick(sim, figure, 2))) == [1, 2, 3, 4, 5]
+
+
+def test_loudness_answered_at_a_sync_measures_the_period_before_it(figure):
+    # music whose level changes every 7 ms: a frame taken on any other grid
+    # than [t - T, t) gives another value
+    rng = np.random.default_rng(4)
+    rate = 16000.0                                                      # [Hz]
+    n = int(3.0 * rate)
+    level = 10.0 ** rng.uniform(-3, 0, int(3.0 / 0.007) + 1)           # [full scale]
+    samples = level[(np.arange(n) / rate / 0.007).astype(int)] * np.sin(2 * np.pi * 440.0 * np.arange(n) / rate)
+    sim = SimFigure(figure, music=(samples, rate), music_node=5)
+    meter = LoudnessMeter(rate, T)
+    phase = rng.uniform(0.0, T)                                         # host ticks vs music start [s]
+    values, frames = [], []
+    for k in range(140):
+        t = k * T + phase                                               # SYNC arrival, model time [s]
+        got = [a for a in sim.handle(wire(protocol.Sync(k, protocol.BROADCAST)), t)
+               if isinstance(a, protocol.Loudness)]
+        start = int(np.floor((t - T) * rate))
+        if start < 0:
+            assert got == []                                            # not a whole period yet
+            continue
+        assert len(got) == 1 and got[0].node == 5
+        want = meter.frame_loudness(samples[start:start + meter.frame_len])[0]
+        assert got[0].value == pytest.approx(want, rel=1e-6)           # float32 on the wire
+        values.append(got[0].value)
+        frames.append(got[0].frame)
+    assert frames == list(range(len(frames)))                          # the node's frame counter
+    assert len(set(values)) > 100                                       # the level really moved
