@@ -28,8 +28,9 @@ def register(sub) -> None:
     p.add_argument("--silent", type=int, nargs="*", default=[], help="nodes that do not answer")
     p.add_argument("--seed", type=int, default=0, help="seed of the fault injection")
     p.add_argument("--trace", help="write, at each SYNC, its arrival time (model time [s]; t0: "
-                                   "CLOCK_MONOTONIC of model time 0), tick and the simulated "
-                                   "positions [unit] to this .npz")
+                                   "CLOCK_MONOTONIC of model time 0), tick, the simulated "
+                                   "positions [unit] and their model time (whole 1 ms steps) "
+                                   "to this .npz")
     p.add_argument("--music", help="a node measures this recording's loudness, played from the "
                                    "start of the run, and reports it in LOUDNESS messages")
     p.add_argument("--loudness-node", type=int, help="the node that does (default: the figure's last)")

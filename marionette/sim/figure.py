@@ -43,7 +43,8 @@ class SimFigure:
             self._meter = LoudnessMeter(rate, config.tick_period)
         self.music_node = music_node
         self._music_sent = 0                # LOUDNESS frames sent
-        self.trace = [] if trace else None  # (time [s], tick, positions [unit] in figure order)
+        # (SYNC arrival [s], tick, positions [unit] in figure order, their model time [s])
+        self.trace = [] if trace else None
 
     def positions(self) -> np.ndarray:
         """Actual positions [unit] of the figure's axes, in configuration order."""
@@ -93,7 +94,8 @@ class SimFigure:
     def _on_sync(self, sync, t: float, rejected: int) -> list:
         self.advance_to(t)
         if self.trace is not None:
-            self.trace.append((t, sync.tick, self.positions()))
+            model_time = next(iter(self.nodes.values())).model.time     # whole internal steps [s]
+            self.trace.append((t, sync.tick, self.positions(), model_time))
         answers = []
         for sim in self._addressed(protocol.BROADCAST):
             sim.on_sync(sync.tick)
@@ -119,9 +121,11 @@ class SimFigure:
         return float(self._meter.frame_loudness(self.music[start:start + n])[0])
 
     def trace_arrays(self) -> dict:
-        """The trace as arrays: time [s], tick, positions [unit] (ticks x axes)."""
+        """The trace as arrays: time (SYNC arrival) [s], tick, positions [unit]
+        (ticks x axes), model_time (of the positions, whole internal steps) [s]."""
         if not self.trace:
             return {"time": np.zeros(0), "tick": np.zeros(0, np.int64),
-                    "positions": np.zeros((0, len(self.config.axes)))}
-        t, k, x = zip(*self.trace)
-        return {"time": np.array(t), "tick": np.array(k, np.int64), "positions": np.array(x)}
+                    "positions": np.zeros((0, len(self.config.axes))), "model_time": np.zeros(0)}
+        t, k, x, m = zip(*self.trace)
+        return {"time": np.array(t), "tick": np.array(k, np.int64), "positions": np.array(x),
+                "model_time": np.array(m)}

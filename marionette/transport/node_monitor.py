@@ -9,8 +9,8 @@ the C tick.
 from __future__ import annotations
 
 import threading
-from collections import deque
 import time
+from collections import deque
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
@@ -131,11 +131,13 @@ class NodeMonitor:
         """(node, evidence tick) of nodes newly found silent at engine tick `tick`.
 
         A node is silent when it missed SILENT_AFTER_TICKS polls that the
-        other nodes' answers show were sent (the evidence tick is the newest
-        answered one; with one node polled per tick, every poll_interval-th
-        SYNC polls a given node): so a
-        receive path that lags under load does not make every node look
-        silent. When no node answers for LINK_LOST_TICKS, all are."""
+        other nodes' answers show were sent (with one node polled per tick,
+        every poll_interval-th SYNC polls a given node): so a receive path
+        that lags under load does not make every node look silent. The
+        evidence tick is the poll that gave it away, the SILENT_AFTER_TICKS-th
+        missed one, however late the answers proving it came. When no node
+        answers for LINK_LOST_TICKS, all are silent (evidence: the newest
+        tick anyone answered)."""
         now = time.monotonic() if now is None else now
         found = []
         with self._lock:
@@ -149,7 +151,9 @@ class NodeMonitor:
                 if (reference - newest) // self.poll_interval >= SILENT_AFTER_TICKS or link_lost:
                     s.silent = True
                     s.silent_events += 1
-                    found.append((s.node, max(reference, newest)))
+                    evidence = (max(reference, newest) if link_lost
+                                else newest + SILENT_AFTER_TICKS * self.poll_interval)
+                    found.append((s.node, evidence))
                     self.events.append((now, f"node {s.node} silent: no STATUS after tick {newest}"))
         return found
 

@@ -115,9 +115,10 @@ def test_watchdog_holds_then_brakes_to_rest(sim, figure, tmp_path):
     # at rest at the end, and the braking kept within the acceleration limit
     # (from the simulator's own trace: exact positions at its clock's times)
     t = np.load(trace)
-    # (two SYNCs read at once share a time: keep the later)
-    after = (t["tick"] > last - 10) & (np.diff(t["time"], append=np.inf) > 1e-4)
-    x, tt = t["positions"][after], t["time"][after]
+    # positions at their model times (whole 1 ms steps: two SYNCs read within
+    # one step share one; keep the later)
+    after = (t["tick"] > last - 10) & (np.diff(t["model_time"], append=np.inf) > 1e-4)
+    x, tt = t["positions"][after], t["model_time"][after]
     np.testing.assert_allclose(x[-5:], x[-1:].repeat(5, axis=0), atol=1e-4)   # the lag creeps
     v = np.diff(x, axis=0) / np.diff(tt)[:, None]
     a = np.diff(v, axis=0) / ((tt[2:] - tt[:-2]) / 2)[:, None]
