@@ -31,8 +31,9 @@ Figures per mode, over the target scenarios (|speed - 1| <= 6 %, SNR >= 20 dB):
 - us_per_tick_median, us_per_tick_p99: wall time of the C step [us]
   (clock_gettime around each call), on the measured ticks of all runs.
 
-Extra keys: lock_s_median, relock_after_pause_s_median, relock_after_jump_s_max [s], scenarios (one row per run) and
-all_scenarios (the same figures over every run, the 10 dB SNR ones too).
+Extra keys: lock_s_median, relock_after_pause_s_median, relock_after_jump_s_max [s],
+scenarios (one row per run) and all_scenarios (the same figures over every
+run, the 10 dB SNR ones too).
 """
 from __future__ import annotations
 
