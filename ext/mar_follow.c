@@ -108,6 +108,8 @@
 #define ONSET_SIGMAS 4.0        /* ... or this many of the silence's frame-to-frame deviations */
 #define RESUME_MIN_WINDOW 16    /* fewest live frames for a tracking measurement after a resume [ticks] */
 #define GAP_DB 3.0              /* stored music this far under the silence would not be heard [dB] */
+#define SPARSE_EVIDENCE 3       /* silent frames where music is expected ... */
+#define SPARSE_SPAN 50          /* ... spread over a hiss-flat stretch this long also mean a pause [ticks] */
 #define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */
 
 typedef struct {
@@ -166,6 +168,7 @@ struct mar_follow {
     uint64_t low_start;         /* first step of the current run of low frames */
     uint64_t last_high;         /* last step whose frame was as loud as expected */
     uint64_t low_run, silent_run;
+    uint64_t silent_start;      /* step of the first frame of the current silent run */
     double frozen;              /* position held in a pause [stored ticks] */
     uint64_t loud_run;          /* frames over the floor while paused */
     double resume_db;           /* a frame this far over the pause's level resumes [dB] */
@@ -984,8 +987,13 @@ static int detect_pause(mar_follow *f, int have)
     double stored = stored_db_at(f, f->p - 0.5 * f->r - 0.5);
     double expected = stored + f->gain;
     double margin = expected - f->nf;                 /* [dB] over the floor */
-    if (margin < AUDIBLE_DB || stored < f->s_level - MUSIC_RANGE_DB)
-        return 0;                                     /* the music is quiet here: no evidence */
+    if (margin < AUDIBLE_DB || stored < f->s_level - MUSIC_RANGE_DB) {
+        /* the music is quiet here: no evidence, but a frame that leaves the
+         * silence's level range shows there is sound (music), not hiss */
+        if (f->silent_run > 0 && fmax(f->silent_hi, db) - fmin(f->silent_lo, db) > STEADY_RANGE_DB)
+            f->silent_run = 0;
+        return 0;
+    }
     int low = db < expected - fmin(LOW_DB, 0.5 * margin);
     if (!low && f->silent_run > 0 && db >= f->silent_lo - NEUTRAL_DB && db <= f->silent_hi + NEUTRAL_DB
         && expected < db + LOW_DB)
@@ -1007,6 +1015,7 @@ static int detect_pause(mar_follow *f, int have)
             if (f->silent_run == 0 || fmax(f->silent_hi, db) - fmin(f->silent_lo, db) > STEADY_RANGE_DB) {
                 f->silent_run = 0;
                 f->silent_lo = f->silent_hi = db;
+                f->silent_start = f->t;
             }
             f->silent_lo = fmin(f->silent_lo, db);
             f->silent_hi = fmax(f->silent_hi, db);
@@ -1021,7 +1030,10 @@ static int detect_pause(mar_follow *f, int have)
         f->low_run = 0;
         f->silent_run = 0;
     }
-    return (double)f->silent_run >= f->opt.pause_after;
+    /* in a quiet passage evidence is sparse: a few silent frames where music
+     * should be heard, and nothing but hiss in between for a second, will do */
+    return (double)f->silent_run >= f->opt.pause_after
+        || (f->silent_run >= SPARSE_EVIDENCE && f->t - f->silent_start >= SPARSE_SPAN);
 }
 
 /* Live minus stored level [dB] on the line (p, r), over loud stored frames:
