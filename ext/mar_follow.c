@@ -974,6 +974,13 @@ static double stored_db_at(const mar_follow *f, double x)
     return f->sdb[j];
 }
 
+/* A frame at db [dB] would widen the current silent run's level range past
+ * what hiss does: it is sound. */
+static int leaves_silent_range(const mar_follow *f, double db)
+{
+    return fmax(f->silent_hi, db) - fmin(f->silent_lo, db) > STEADY_RANGE_DB;
+}
+
 /* Pause detection while following; returns 1 when the recorder stopped.
  * Evidence only where the stored music says the live frame should stand
  * clearly over the noise floor; there a frame is "low" if far below what
@@ -990,7 +997,7 @@ static int detect_pause(mar_follow *f, int have)
     if (margin < AUDIBLE_DB || stored < f->s_level - MUSIC_RANGE_DB) {
         /* the music is quiet here: no evidence, but a frame that leaves the
          * silence's level range shows there is sound (music), not hiss */
-        if (f->silent_run > 0 && fmax(f->silent_hi, db) - fmin(f->silent_lo, db) > STEADY_RANGE_DB)
+        if (f->silent_run > 0 && leaves_silent_range(f, db))
             f->silent_run = 0;
         return 0;
     }
@@ -1012,7 +1019,7 @@ static int detect_pause(mar_follow *f, int have)
         int deep = db < f->nf + fmin(NEAR_FLOOR_DB, 0.5 * margin) || db < expected - DEEP_DB;
         if (deep && steady) {
             /* hiss stays within a few dB; a quiet passage of music moves more */
-            if (f->silent_run == 0 || fmax(f->silent_hi, db) - fmin(f->silent_lo, db) > STEADY_RANGE_DB) {
+            if (f->silent_run == 0 || leaves_silent_range(f, db)) {
                 f->silent_run = 0;
                 f->silent_lo = f->silent_hi = db;
                 f->silent_start = f->t;

@@ -50,9 +50,7 @@ class LoudnessMeter:
         self._consumed = 0                                      # [samples] dropped before _pending
 
     def feed(self, block) -> np.ndarray:
-        x = np.asarray(block, dtype=np.float64)
-        if x.ndim == 2:
-            x = x.mean(axis=1)
+        x = mono(block)
         self._pending = np.concatenate([self._pending, x])
         starts = []
         k = self._frames
@@ -78,6 +76,12 @@ class LoudnessMeter:
         # Parseval: mean square of the band = 2 * sum |X|^2 / N^2 (one-sided spectrum)
         power = 2.0 * np.sum(np.abs(spectrum[:, self._band]) ** 2, axis=1) / self.frame_len ** 2
         return np.sqrt(power * 2.0)      # full-scale sine (mean square 1/2) -> 1.0
+
+
+def mono(samples) -> np.ndarray:
+    """Samples (n,) or (n, channels) as one channel, the mean of them [full scale]."""
+    x = np.asarray(samples, dtype=np.float64)
+    return x.mean(axis=1) if x.ndim == 2 else x
 
 
 def loudness(samples, sample_rate: float, period: float = FRAME_PERIOD) -> np.ndarray:

@@ -102,18 +102,19 @@ def scenarios(duration: dict, seconds: float | None, quick: bool, seed: int = SE
 
         # events (pauses, gain ramps, the jump) fall where the live music
         # still plays: the start is drawn first
+        v_pauses, v_jump = 1.06, 0.94                                  # their deck speeds [1]
         s_pauses, s_jump = start(), start()
-        m_pauses, m_jump = music_s(s_pauses, 1.06), music_s(s_jump, 0.94)
+        m_pauses, m_jump = music_s(s_pauses, v_pauses), music_s(s_jump, v_jump)
         runs = [
             ("fast", True, Deck(speed=1.03, wow=0.002, wow_hz=0.7, flutter=0.0005, flutter_hz=6.0,
                                 snr_db=30.0, sample_rate=22050, start=start())),
             ("slow-room", True, Deck(speed=0.95, drift=0.005, wow=0.004, wow_hz=0.5, flutter=0.001,
                                      flutter_hz=8.0, reverb_s=0.5, snr_db=20.0, sample_rate=16000,
                                      start=start())),
-            ("pauses", True, Deck(speed=1.06, wow=0.001, wow_hz=0.9, gain_db=gains(m_pauses),
+            ("pauses", True, Deck(speed=v_pauses, wow=0.001, wow_hz=0.9, gain_db=gains(m_pauses),
                                   snr_db=20.0, pauses=pauses(2, m_pauses), sample_rate=11025,
                                   start=s_pauses)),
-            ("jump", True, Deck(speed=0.94, wow=0.005, wow_hz=1.0, flutter=0.002, flutter_hz=10.0,
+            ("jump", True, Deck(speed=v_jump, wow=0.005, wow_hz=1.0, flutter=0.002, flutter_hz=10.0,
                                 reverb_s=0.3, snr_db=30.0, sample_rate=22050, start=s_jump,
                                 jump=(float(rng.uniform(0.3, 0.5) * m_jump),
                                       float(rng.uniform(0.05, 0.7) * d)))),
@@ -190,7 +191,7 @@ def check_targets(result: dict) -> list[tuple[str, float, bool]]:
 
 
 def run(seconds: float | None = None, quick: bool = False, seed: int = SEED, progress=None,
-        seeds: int = 1) -> list[dict]:
+        seeds: int = SEEDS) -> list[dict]:
     """One result per mode (smooth, paper) with the documented keys, over
     the scenarios of seeds seed, seed + 1, ... (seeds of them)."""
     pieces = {}

@@ -13,7 +13,7 @@ import numpy as np
 
 from marionette import protocol
 from marionette.config import FigureConfig
-from marionette.loudness import LoudnessMeter
+from marionette.loudness import LoudnessMeter, mono
 from marionette.sim.faults import Faults
 from marionette.sim.node import DEFAULT_WATCHDOG_TICKS, SimNode
 
@@ -38,8 +38,7 @@ class SimFigure:
         self.music = None
         if music is not None:
             samples, rate = music
-            samples = np.asarray(samples, dtype=float)                # [full scale]
-            self.music = samples.mean(axis=1) if samples.ndim == 2 else samples
+            self.music = mono(samples)                                # [full scale]
             self._meter = LoudnessMeter(rate, config.tick_period)
         self.music_node = music_node
         self._music_sent = 0                # LOUDNESS frames sent

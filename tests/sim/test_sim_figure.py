@@ -146,8 +146,8 @@ def test_loudness_answered_at_a_sync_measures_the_period_before_it(figure):
     rate = 16000.0                                                      # [Hz]
     n = int(3.0 * rate)
     level = 10.0 ** rng.uniform(-3, 0, int(3.0 / 0.007) + 1)           # [full scale]
-    t = np.arange(n) / rate                                             # [s]
-    samples = level[(t / 0.007).astype(int)] * np.sin(2 * np.pi * 440.0 * t)
+    ts = np.arange(n) / rate                                            # sample times [s]
+    samples = level[(ts / 0.007).astype(int)] * np.sin(2 * np.pi * 440.0 * ts)
     sim = SimFigure(figure, music=(samples, rate), music_node=5)
     meter = LoudnessMeter(rate, T)
     phase = rng.uniform(0.0, T)                                         # host ticks vs music start [s]
