@@ -44,15 +44,18 @@
  * near twin elsewhere does not lock until the music tells them apart.
  *
  * Pause. Where the stored music says the live frame should stand clearly
- * over the noise floor (the quietest live frame of the last 20 s; the
- * live-minus-stored level is tracked), frames far below that, near the
- * floor (or very far below) and steady like hiss, for pause_after ticks:
- * the recorder stopped. The position goes back to where the silence began
+ * over the noise floor (the quietest live frame of the last 20 s, moved
+ * with the live-minus-stored level, as the hiss on the tape turns with the
+ * volume knob), frames far below that, near the floor (or very far below)
+ * and steady like hiss, for pause_after ticks: the recorder stopped. The position goes back to where the silence began
  * and holds (rate 0). Two frames clearly above the silence (by a few of its
  * own frame-to-frame wobbles) resume it there, from the start of the rise;
- * the resumed place is on probation (HOLDING, search beside) until the
- * tracker confirms it, and silence or unclear music in that time sends it
- * to the search: a jump into a quiet passage does not loop through pauses.
+ * the resumed place is on probation (HOLDING, search beside). A near search
+ * correlates the frames since the restart at lags of up to 1 s around it
+ * and locks on a clear peak there (a deck that backs up on restart, a stop
+ * placed a little late); without one the tracker confirms the place after
+ * NEAR_TICKS. Silence or unclear music in probation sends it to the whole-
+ * piece search: a jump into a quiet passage does not loop through pauses.
  *
  * Doubt. A collapse of the tracking peak height (short-run average 0.25
  * under the long-run one) in clear music means the tape may have jumped to
@@ -70,7 +73,8 @@
 #define TRACK_LAGS 3            /* tracking lags -3..3 [ticks] */
 #define VERIFY_LAGS 6           /* verification lags -6..6 [ticks] */
 #define WIDE_LAGS 12            /* tracking lags at most -12..12 [ticks] */
-#define MAX_LAGS 12
+#define NEAR_LAGS 50            /* near search reach -50..50 (1 s either way) [ticks] */
+#define MAX_LAGS NEAR_LAGS
 #define LEVEL_RELEASE_DB 0.1    /* running peak level falls this much per tick [dB] */
 #define TINY 1e-10              /* loudness floor before the logarithm [full scale] */
 #define FLOOR_BLOCK 50          /* noise floor: minimum over blocks of this many frames [ticks] ... */
@@ -83,7 +87,7 @@
 #define AUDIBLE_DB 6.0          /* expected level this far over the floor counts as music [dB] */
 #define RESUME_DB 10.0          /* a frame this far over the floor is music again [dB] */
 #define RESUME_VAR 16.0         /* position variance after a resume [tick^2] */
-#define PAUSE_ALPHA 0.05        /* the silence's level estimate, smoothing per frame [1] */
+#define PAUSE_ALPHA 0.2         /* the silence's level estimate, smoothing per frame [1] */
 #define MIN_RESUME_DB 3.0       /* ... or less where the music is quiet, not below this [dB] */
 #define LOUD_DB 15.0            /* stored frames within this of the stored level count for the gain [dB] */
 #define GAIN_STEP_DB 0.5        /* the gain estimate moves at most this per frame [dB] */
@@ -111,6 +115,8 @@
 #define SPARSE_EVIDENCE 3       /* silent frames where music is expected ... */
 #define SPARSE_SPAN 50          /* ... spread over a hiss-flat stretch this long also mean a pause [ticks] */
 #define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */
+#define NEAR_TICKS 250          /* the near search gives up this long after the restart [ticks] */
+#define NEAR_SEP 4              /* a rival peak of the near search lies at least this far away [ticks] */
 
 typedef struct {
     double p, r;                /* position now [stored ticks], rate [stored ticks per tick] */
@@ -181,6 +187,14 @@ struct mar_follow {
     int probation;              /* resumed from a pause: not LOCKED until the place is confirmed */
     uint64_t probation_ok;      /* accepted measurements since the resume */
     uint64_t pause_start;       /* step the pause was detected */
+
+    /* near search: after a restart, the place is looked for around the resumed one */
+    int near;                   /* running */
+    double near_p, near_r;      /* centre of its reach now [stored ticks], its rate [stored ticks per tick] */
+    uint64_t near_from;         /* first live step it uses (the restart) */
+    uint64_t near_end;          /* step it gives up */
+    double near_prev;           /* its last clear offset [ticks], NAN if none */
+    int near_confirmed;         /* consecutive ticks it found the same offset */
 
     /* search */
     int searching;
@@ -475,7 +489,7 @@ void mar_follow_reset(mar_follow *f, double position)
     f->last_good = f->t;
     f->seg_start = f->t + 1;          /* older frames belong to another stretch of tape */
     f->have_gain = 0;
-    f->doubt = f->probation = 0;
+    f->doubt = f->probation = f->near = 0;
     f->h_slow = f->h_fast = 0.0;
     stop_search(f);
     if (isfinite(position)) {
@@ -1065,8 +1079,14 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
         /* a frame far below is a dropout or a pause, not the volume knob; and
          * the knob turns slowly: at most GAIN_STEP_DB per frame */
         double diff = sum / (double)cnt - f->gain;
-        if (diff > -LOW_DB)
-            f->gain += fmax(-GAIN_STEP_DB, fmin(GAIN_STEP_DB, GAIN_ALPHA * diff));
+        if (diff > -LOW_DB) {
+            double step = fmax(-GAIN_STEP_DB, fmin(GAIN_STEP_DB, GAIN_ALPHA * diff));
+            f->gain += step;
+            /* the hiss is on the tape, before the knob: the floor moves with it */
+            for (int b = 0; b < FLOOR_BLOCKS; b++)
+                f->floor_min[b] += step;
+            f->nf += step;
+        }
     }
 }
 
@@ -1192,7 +1212,65 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     if (!was_following || fabs(old - f->p) > 2.0)
         *flags |= MAR_FOLLOW_F_JUMP;
     f->c.locks++;
+    f->near = 0;
     stop_search(f);
+}
+
+/* Start the near search around `centre` now [stored ticks], moving at
+ * rate r, on the live frames of step `from` on. */
+static void start_near(mar_follow *f, double centre, double r, uint64_t from)
+{
+    f->near = 1;
+    f->near_p = centre;
+    f->near_r = r > 0.0 ? r : 1.0;
+    f->near_from = from;
+    f->near_end = f->t + NEAR_TICKS;
+    f->near_prev = NAN;
+    f->near_confirmed = 0;
+}
+
+/* The near search, one tick: the live frames since the restart against the
+ * stored music around the resumed place, at lags -NEAR_LAGS .. NEAR_LAGS.
+ * Only places within its reach compete, so a second or so of music tells
+ * them apart where the whole-piece search would wait for a longer window.
+ * It locks on a peak that is good, sharp, leads every other peak by the
+ * lock margin and stays put (within a tick) LOCK_CONFIRM ticks in a row. */
+static void near_search(mar_follow *f, uint32_t *flags)
+{
+    f->near_p += f->near_r;
+    if (f->t >= f->near_end) {
+        f->near = 0;
+        return;
+    }
+    size_t ages = usable(f, f->near_from, f->opt.verify_window);
+    long j0;
+    double c;
+    size_t m = ages >= f->opt.min_window ? resample(f, f->near_p, f->near_r, ages, &j0, &c) : 0;
+    if (m < f->opt.min_window / 2)
+        return;
+    const int lags = NEAR_LAGS;
+    double rho[2 * NEAR_LAGS + 1], h, kappa;
+    int edge;
+    if (correlate(f, f->rs, 0, m, j0, lags, rho) < f->opt.quiet_db)
+        return;
+    double d = peak(rho, lags, &h, &kappa, &edge);
+    int b = (int)lround(d) + lags;
+    double rival = -1.0;                              /* the best other peak [1] */
+    for (int i = 1; i < 2 * lags; i++)
+        if (abs(i - b) >= NEAR_SEP && rho[i] >= rho[i - 1] && rho[i] >= rho[i + 1] && rho[i] > rival)
+            rival = rho[i];
+    double margin = f->opt.lock_margin * sqrt((double)f->opt.verify_window / (double)m);
+    if (edge || h < f->opt.lock_threshold || kappa < KAPPA_LOCK_Z * (1.0 - h * h)
+        || fisher(h) - fisher(rival) < margin) {
+        f->near_confirmed = 0;
+        return;
+    }
+    f->near_confirmed = !isnan(f->near_prev) && fabs(d - f->near_prev) <= 1.0 ? f->near_confirmed + 1 : 1;
+    f->near_prev = d;
+    if (f->near_confirmed < LOCK_CONFIRM)
+        return;
+    cand e = {.p = f->near_p + d, .r = f->near_r, .fine = h, .since = f->near_from};
+    lock_on(f, &e, flags);
 }
 
 static void run_search(mar_follow *f, uint32_t *flags)
@@ -1282,6 +1360,7 @@ static void pause_now(mar_follow *f)
     double margin = expected + f->gain - f->pause_db;
     f->resume_db = fmin(RESUME_DB, fmax(MIN_RESUME_DB, 0.5 * margin));
     f->c.pauses++;
+    f->near = 0;
     stop_search(f);
 }
 
@@ -1347,6 +1426,7 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
     f->bad_since = f->quiet_since = 0;
     f->low_run = f->silent_run = 0;
     kf_init(f, RESUME_VAR, f->P11 + 1e-6);
+    start_near(f, f->p, f->r, onset);
     f->c.resumes++;
     *flags |= MAR_FOLLOW_F_JUMP;
     return 1;
@@ -1379,13 +1459,15 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
     } else {
         ok = track_smooth(f, &quiet, flags);
     }
+    /* the volume knob turns whether or not the correlation is clear (a ramp
+     * in a quiet passage would otherwise look like a pause) */
+    update_gain(f, f->p, f->r > 0.0 ? f->r : 1.0, 1);
     if (ok) {
         f->measured = 1;
         f->probation_ok++;
         f->c.measurements++;
         f->last_good = f->t;
         f->bad_since = f->quiet_since = 0;
-        update_gain(f, f->p, f->r > 0.0 ? f->r : 1.0, 1);
     } else if (quiet || !have) {
         f->quiet_since++;
         f->conf *= 0.99;
@@ -1409,7 +1491,8 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
     /* after a resume, the place is on probation until the tracker has
      * confirmed it for lock_window frames; unclear music in that time sends
      * it back to the search */
-    if (f->probation && f->probation_ok >= f->opt.lock_window / 2 && f->bad_since == 0 && !f->doubt)
+    if (f->probation && !f->near && f->probation_ok >= f->opt.lock_window / 2 && f->bad_since == 0
+        && !f->doubt)
         f->probation = 0;
     /* LOCKED: a measurement confirmed the place since the last (re)start, recently */
     f->state = since <= f->opt.hold_after && f->measured && !f->doubt && !f->probation
@@ -1458,7 +1541,7 @@ void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
             if (f->probation) {
                 /* silence again where the resumed place expects music: the
                  * place is doubtful; search from here (no position guess) */
-                f->probation = f->doubt = 0;
+                f->probation = f->doubt = f->near = 0;
                 f->state = MAR_FOLLOW_SEARCHING;
                 f->low_run = f->silent_run = 0;
                 stop_search(f);
@@ -1471,7 +1554,9 @@ void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
             follow(f, have, &flags);
     }
 
-    /* 3. the search, when not locked or in doubt */
+    /* 3. the searches, when not locked or in doubt */
+    if (f->near && f->state != MAR_FOLLOW_PAUSED && !resumed)
+        near_search(f, &flags);
     if (f->searching)
         run_search(f, &flags);
     if (f->state == MAR_FOLLOW_SEARCHING) {
