@@ -47,9 +47,10 @@
  * over the noise floor (the quietest live frame of the last 20 s, moved
  * with the live-minus-stored level, as the hiss on the tape turns with the
  * volume knob), frames far below that, near the floor (or very far below)
- * and steady like hiss, for pause_after ticks: the recorder stopped. The position goes back to where the silence began
- * and holds (rate 0). Two frames clearly above the silence (by a few of its
- * own frame-to-frame wobbles) resume it there, from the start of the rise;
+ * and steady like hiss, for pause_after ticks: the recorder stopped. The
+ * position goes back to where the silence began and holds (rate 0). Two
+ * frames clearly above the silence (by a few of its own frame-to-frame
+ * wobbles) resume it there, from the start of the rise;
  * the resumed place is on probation (HOLDING, search beside). A near search
  * correlates the frames since the restart at lags of up to 1 s around it
  * and locks on a clear peak there (a deck that backs up on restart, a stop
@@ -906,6 +907,21 @@ static cand *next_to_verify(mar_follow *f)
     return best;
 }
 
+/* A correlation peak of height rho [1] and curvature kappa [1/tick^2] is
+ * good and sharp enough to lock on. */
+static int lockable_peak(const mar_follow *f, double rho, double kappa)
+{
+    return rho >= f->opt.lock_threshold && kappa >= KAPPA_LOCK_Z * (1.0 - rho * rho);
+}
+
+/* The lead in Fisher z a lock needs over any other place, from a window of
+ * `frames` live frames: a short window proves less, so the margin grows as
+ * 1/sqrt(frames) below verify_window. */
+static double lock_lead(const mar_follow *f, size_t frames)
+{
+    return f->opt.lock_margin * sqrt((double)f->opt.verify_window / (double)frames);
+}
+
 /* The entry to lock on, or NULL: good enough, confirmed, clearly ahead of
  * every other place, after a whole sweep. */
 static cand *lock_choice(mar_follow *f)
@@ -918,12 +934,10 @@ static cand *lock_choice(mar_follow *f)
         if (e->used && !isnan(e->fine) && (!best || e->fine > best->fine))
             best = e;
     }
-    if (!best || best->fine < f->opt.lock_threshold || best->confirmed < LOCK_CONFIRM
-        || best->kappa < KAPPA_LOCK_Z * (1.0 - best->fine * best->fine)
+    if (!best || !lockable_peak(f, best->fine, best->kappa) || best->confirmed < LOCK_CONFIRM
         || usable(f, best->since, f->opt.lock_window) < f->opt.lock_window)
         return NULL;
-    /* a short window proves less: the margin grows as 1/sqrt(frames) below verify_window */
-    double margin = f->opt.lock_margin * sqrt((double)f->opt.verify_window / (double)best->frames);
+    double margin = lock_lead(f, best->frames);
     for (int i = 0; i < POOL; i++) {
         cand *e = &f->pool[i];
         if (!e->used || e == best || fabs(e->p - best->p) < DISTINCT)
@@ -1248,20 +1262,17 @@ static void near_search(mar_follow *f, uint32_t *flags)
     size_t m = ages >= f->opt.min_window ? resample(f, f->near_p, f->near_r, ages, &j0, &c) : 0;
     if (m < f->opt.min_window / 2)
         return;
-    const int lags = NEAR_LAGS;
     double rho[2 * NEAR_LAGS + 1], h, kappa;
     int edge;
-    if (correlate(f, f->rs, 0, m, j0, lags, rho) < f->opt.quiet_db)
+    if (correlate(f, f->rs, 0, m, j0, NEAR_LAGS, rho) < f->opt.quiet_db)
         return;
-    double d = peak(rho, lags, &h, &kappa, &edge);
-    int b = (int)lround(d) + lags;
+    double d = peak(rho, NEAR_LAGS, &h, &kappa, &edge);
+    int b = (int)lround(d) + NEAR_LAGS;
     double rival = -1.0;                              /* the best other peak [1] */
-    for (int i = 1; i < 2 * lags; i++)
+    for (int i = 1; i < 2 * NEAR_LAGS; i++)
         if (abs(i - b) >= NEAR_SEP && rho[i] >= rho[i - 1] && rho[i] >= rho[i + 1] && rho[i] > rival)
             rival = rho[i];
-    double margin = f->opt.lock_margin * sqrt((double)f->opt.verify_window / (double)m);
-    if (edge || h < f->opt.lock_threshold || kappa < KAPPA_LOCK_Z * (1.0 - h * h)
-        || fisher(h) - fisher(rival) < margin) {
+    if (edge || !lockable_peak(f, h, kappa) || fisher(h) - fisher(rival) < lock_lead(f, m)) {
         f->near_confirmed = 0;
         return;
     }
@@ -1488,9 +1499,10 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         uint64_t back = f->opt.window / 2;
         start_search(f, f->t + 1 > back ? f->t + 1 - back : 0);
     }
-    /* after a resume, the place is on probation until the tracker has
-     * confirmed it for lock_window frames; unclear music in that time sends
-     * it back to the search */
+    /* after a resume, the place is on probation until the near search has
+     * locked (which ends it) or given up and the tracker has confirmed the
+     * place for lock_window / 2 frames; unclear music in that time sends it
+     * back to the search */
     if (f->probation && !f->near && f->probation_ok >= f->opt.lock_window / 2 && f->bad_since == 0
         && !f->doubt)
         f->probation = 0;

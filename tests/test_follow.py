@@ -59,6 +59,11 @@ def first_lock(track, err, after=0.0, within=0.05):
     return t[idx[0]] if len(idx) else math.inf
 
 
+def lock_entries(track):
+    """Ticks at which the follower entered LOCKED (from any other state)."""
+    before = np.concatenate([[-1], track.state[:-1]])
+    return np.flatnonzero((track.state == LOCKED) & (before != LOCKED))
+
 def test_c_follower_under_asan_ubsan_without_step_allocations(tmp_path):
     if shutil.which("gcc") is None:
         pytest.skip("needs gcc")
@@ -131,8 +136,7 @@ def test_a_deck_that_backs_up_on_restart_is_found_near_the_stop(piece, stored):
         t = np.arange(len(err)) * T
         after = t >= restart + 1.5
         assert np.max(np.abs(err[after])) <= 0.05, (case, start, stop, back)
-        entered = np.flatnonzero((track.state == LOCKED)
-                                 & (np.concatenate([[-1], track.state[:-1]]) != LOCKED))
+        entered = lock_entries(track)
         assert np.all(np.abs(err[entered]) <= 0.2), (case, start, stop, back)
 
 
@@ -148,8 +152,7 @@ def test_finds_an_unknown_start_without_false_locks(piece, stored):
                     sample_rate=float(rng.choice([11025, 16000, 22050])), seconds=30.0, seed=case)
         track, played, err, f = live_track(piece, stored, deck)
         times.append(first_lock(track, err))
-        entered = np.flatnonzero((track.state == LOCKED)
-                                 & (np.concatenate([[-1], track.state[:-1]]) != LOCKED))
+        entered = lock_entries(track)
         assert np.all(np.abs(err[entered]) <= 0.2), (case, start)
         assert np.all(np.abs(err[track.state == LOCKED]) <= 0.2), (case, start)
     assert max(times) <= 12.0, times
@@ -165,7 +168,7 @@ def test_a_jump_into_alike_music_is_not_taken_for_a_pause(piece, stored):
                 start=9.93, jump=(47.7, 71.26), seconds=70.0, seed=3)
     track, played, err, f = live_track(piece, stored, deck)
     t = np.arange(len(err)) * T
-    entered = np.flatnonzero((track.state == LOCKED) & (np.concatenate([[-1], track.state[:-1]]) != LOCKED))
+    entered = lock_entries(track)
     assert np.all(np.abs(err[entered]) <= 0.2)
     assert np.all(np.abs(err[(track.state == LOCKED) & (t >= 49.0)]) <= 0.2)
     assert f.counters()["pauses"] == 0                        # the tape never stopped
@@ -184,7 +187,7 @@ def test_resumes_in_time_where_the_music_restarts_quietly(piece, stored):
     restart = 69.5 + 3.04                                     # the second pause's end
     ok = np.flatnonzero((np.abs(err) <= 0.05) & (track.state != PAUSED) & (t >= restart))
     assert len(ok) and t[ok[0]] - restart <= 0.5
-    entered = np.flatnonzero((track.state == LOCKED) & (np.concatenate([[-1], track.state[:-1]]) != LOCKED))
+    entered = lock_entries(track)
     assert np.all(np.abs(err[entered]) <= 0.2)
 
 
