@@ -59,22 +59,31 @@ def made_up(errors_s, states, resumes=(), jumps=(), paused=None):
 def test_figures_on_a_known_track():
     n = 1000                                                   # 20 s
     err = np.zeros(n)
-    err[:100] = 5.0                                            # searching for 2 s: not measured
+    err[:250] = 5.0                                            # searching for 5 s
     err[500:510] = 0.03                                        # 10 ticks 30 ms off
     err[600:602] = 0.3                                         # 2 ticks 300 ms off
     state = np.full(n, LOCKED)
-    state[:100] = SEARCHING
+    state[:250] = SEARCHING
     m = sync.measure(*made_up(err, state), ns=np.full(n, 2000))
     s = sync.summarize([m])
-    measured = n - 100                                         # from the lock on
-    assert s["within20"] == pytest.approx((measured - 12) / measured)
-    assert s["within50"] == pytest.approx((measured - 2) / measured)
-    assert s["within200"] == pytest.approx((measured - 2) / measured)
-    assert s["lock_s_max"] == pytest.approx(2.0)
+    measured = n - 150                                         # from 3 s on: 100 searching ticks count
+    assert s["within20"] == pytest.approx((measured - 112) / measured)
+    assert s["within50"] == pytest.approx((measured - 102) / measured)
+    assert s["within200"] == pytest.approx((measured - 102) / measured)
+    assert s["lock_s_max"] == pytest.approx(5.0)
     assert s["false_locks"] == 0 and s["us_per_tick_median"] == pytest.approx(2.0)
     assert math.isnan(s["relock_after_pause_s_max"])
     targets = dict((label, ok) for label, _, ok in sync.check_targets({**s, "relock_after_pause_s_max": 0.1}))
-    assert targets["within200 >= 1"] is False and targets["lock_s_max <= 3"] is True
+    assert targets["within200 >= 1"] is False and targets["lock_s_max <= 3"] is False
+
+
+def test_a_run_that_never_locks_counts_as_missed():
+    n = 1000
+    good = sync.measure(*made_up(np.zeros(n), np.full(n, LOCKED)))
+    never = sync.measure(*made_up(np.full(n, 5.0), np.full(n, SEARCHING)))
+    s = sync.summarize([good, never])
+    assert s["within200"] == pytest.approx(0.5)                # not 1.0: the lost run is not dropped
+    assert s["lock_s_max"] == math.inf
 
 
 def test_false_locks_and_resume_times():
@@ -88,9 +97,9 @@ def test_false_locks_and_resume_times():
     m = sync.measure(*made_up(err, state, resumes=[16.0]))
     assert m["false_locks"] == 1
     assert m["relock_pause"] == [pytest.approx(0.6)]
-    # locked (correctly) from the first tick: every tick is measured but
-    # the 0.5 s after the resume; the false lock's ticks count
-    assert len(m["errors"]) == n - 25 and np.sum(m["errors"] > 1.0) == 40
+    # every tick from 3 s on is measured but the 0.5 s after the resume;
+    # the false lock's ticks count
+    assert len(m["errors"]) == n - 150 - 25 and np.sum(m["errors"] > 1.0) == 40
 
 
 def test_overlapping_pauses_restart_the_tape_once():

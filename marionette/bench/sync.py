@@ -19,10 +19,13 @@ Figures per mode, over the target scenarios (|speed - 1| <= 6 %, SNR >= 20 dB):
 
 - within20, within50, within200: share of measured ticks whose position is
   within 20, 50, 200 ms of the truth [1]; median_ms, p95_ms of |error| [ms].
-  Measured ticks, "after lock" as the targets say: every tick from the
-  first correct lock of a run on (the time before it is lock_s), but the
-  3 s after a jump and the 0.5 s after a pause ends (those have their own
-  figures). Ticks after a jump that the follower spends searching count;
+  Measured ticks, as the issue defines them: every tick after the first
+  ACCURACY_FROM_S = 3 s of a run (the lock target), whether the follower
+  has locked by then or not, but the 3 s after a jump and the 0.5 s after
+  a pause ends (those have their own figures). A slow lock thus costs
+  accuracy, and a run that never locks counts with all its errors instead
+  of dropping out. Ticks after a jump that the follower spends searching
+  count;
 - lock_s_max: the longest time from the start of a run to the first tick
   that is LOCKED within 200 ms of the truth [s] (inf: never);
 - relock_after_pause_s_max: the longest time from the tape restarting after
@@ -54,6 +57,7 @@ from marionette.loudness import FRAME_PERIOD, loudness
 T = FRAME_PERIOD                # tick period [s]
 SEED = 20261122
 SEEDS = 4                       # sets of scenarios by default
+ACCURACY_FROM_S = 3.0           # accuracy is measured from this live time on [s]
 AFTER_JUMP_S = 3.0              # ... after a jump [s]
 AFTER_PAUSE_S = 0.5             # ... after a pause ends [s]
 FALSE_LOCK_S = 0.5              # entering LOCKED this far off is a false lock [s]
@@ -143,7 +147,7 @@ def measure(track, played, ns=None) -> dict:
 
     good_lock = (state == LOCKED) & (np.abs(err) <= 0.2)
     lock_s = first(good_lock, 0.0)
-    sel = t >= lock_s
+    sel = t >= ACCURACY_FROM_S
     for r in played.resumes:
         sel &= ~((t >= r) & (t < r + AFTER_PAUSE_S))
     for j in played.jumps:
@@ -164,6 +168,8 @@ def summarize(rows: list[dict]) -> dict:
     pauses = [x for r in rows for x in r["relock_pause"]]
     jumps = [x for r in rows for x in r["relock_jump"]]
     q = lambda a, p: float(np.quantile(a, p)) if len(a) else float("nan")      # noqa: E731
+    # times may be inf (never): take an observed value, do not interpolate
+    q_time = lambda a, p: float(np.quantile(a, p, method="nearest")) if len(a) else float("nan")  # noqa: E731
     return {
         "within20": float(np.mean(e <= 0.020)) if len(e) else float("nan"),
         "within50": float(np.mean(e <= 0.050)) if len(e) else float("nan"),
@@ -171,8 +177,8 @@ def summarize(rows: list[dict]) -> dict:
         "median_ms": q(e, 0.5) * 1e3,
         "p95_ms": q(e, 0.95) * 1e3,
         "lock_s_max": max((r["lock_s"] for r in rows), default=float("nan")),
-        "lock_s_median": q(np.array([r["lock_s"] for r in rows]), 0.5),
-        "relock_after_pause_s_median": q(np.array(pauses), 0.5),
+        "lock_s_median": q_time(np.array([r["lock_s"] for r in rows]), 0.5),
+        "relock_after_pause_s_median": q_time(np.array(pauses), 0.5),
         "relock_after_pause_s_max": max(pauses, default=float("nan")),
         "relock_after_jump_s_max": max(jumps, default=float("nan")),
         "false_locks": int(sum(r["false_locks"] for r in rows)),
@@ -243,7 +249,7 @@ def _fmt(v, spec):
 
 def format_table(results: list[dict]) -> str:
     lines = ["marionette bench sync: music following against the tape deck's ground truth "
-             f"(tick {T * 1e3:g} ms; accuracy on the ticks after the first correct lock)"]
+             f"(tick {T * 1e3:g} ms; accuracy on the ticks after the first {ACCURACY_FROM_S:g} s)"]
     if results:
         lines.append(describe(results[0]["machine"]))
     lines.append("")
