@@ -47,8 +47,10 @@
  * over the noise floor (the quietest live frame of the last 20 s, moved
  * with the live-minus-stored level, as the hiss on the tape turns with the
  * volume knob), frames far below that, near the floor (or very far below)
- * and steady like hiss, for pause_after ticks: the recorder stopped. The
- * position goes back to where the silence began and holds (rate 0). Two
+ * and steady like hiss, for pause_after ticks: the recorder stopped. This
+ * runs while the place is LOCKED or HOLDING on the flywheel (a quiet
+ * passage or a volume turn can make the tracking unclear just before a
+ * stop), not in doubt (below). The position goes back to where the silence began and holds (rate 0). Two
  * frames clearly above the silence (by a few of its own frame-to-frame
  * wobbles) resume it there, from the start of the rise;
  * the resumed place is on probation (HOLDING, search beside). A near search
@@ -61,7 +63,12 @@
  * Doubt. A collapse of the tracking peak height (short-run average 0.25
  * under the long-run one) in clear music means the tape may have jumped to
  * alike music (the same drums elsewhere): HOLDING, and the search beside
- * (the tracker's place in its pool) decides by the lock rules. */
+ * (the tracker's place in its pool) decides by the lock rules. In doubt a
+ * quiet break is not taken for a pause, with two exceptions: a collapse
+ * that comes with a silent run already under way is the stop itself (no
+ * doubt is raised), and one while the volume knob turns (the gain estimate
+ * runs more than TURNING_DB ahead of its 1 s average) is the feature's
+ * clamp lagging behind the knob, not a wrong place. */
 #include "mar_follow.h"
 
 #include <errno.h>
@@ -93,6 +100,8 @@
 #define LOUD_DB 15.0            /* stored frames within this of the stored level count for the gain [dB] */
 #define GAIN_STEP_DB 0.5        /* the gain estimate moves at most this per frame [dB] */
 #define GAIN_ALPHA 0.1          /* live-minus-stored gain estimate smoothing per frame [1] */
+#define GAIN_SLOW_ALPHA 0.02    /* ... and its slow twin's (a time constant of 1 s) [1] */
+#define TURNING_DB 2.0          /* the two this far apart: the volume knob is turning [dB] */
 #define DISTINCT 25.0           /* candidates this far apart are different places [ticks] */
 #define MIN_SEARCH_BLOCKS 12    /* fewest live blocks before the search scores anything */
 #define SEARCH_MIN_SCORE 0.3    /* coarse score worth a pool entry [1] */
@@ -171,6 +180,7 @@ struct mar_follow {
     uint64_t last_good;         /* step of the last accepted measurement */
     uint64_t bad_since, quiet_since;  /* unclear / quiet steps since last_good */
     double gain;                /* live minus stored level [dB] */
+    double gain_slow;           /* ... followed slowly: the knob turns while the two differ [dB] */
     int have_gain;
     uint64_t low_start;         /* first step of the current run of low frames */
     uint64_t last_high;         /* last step whose frame was as loud as expected */
@@ -1009,13 +1019,20 @@ static int leaves_silent_range(const mar_follow *f, double db)
     return fmax(f->silent_hi, db) - fmin(f->silent_lo, db) > STEADY_RANGE_DB;
 }
 
+/* The volume knob is turning: the feature's clamp lags behind it, so the
+ * tracking correlation may drop without the place being wrong. */
+static int knob_turning(const mar_follow *f)
+{
+    return f->have_gain && fabs(f->gain - f->gain_slow) > TURNING_DB;
+}
+
 /* Pause detection while following; returns 1 when the recorder stopped.
  * Evidence only where the stored music says the live frame should stand
  * clearly over the noise floor; there a frame is "low" if far below what
  * is expected and "silent" if also near the floor. */
 static int detect_pause(mar_follow *f, int have)
 {
-    if (!have || !f->have_gain || !f->measured || (f->state != MAR_FOLLOW_LOCKED && !f->probation))
+    if (!have || !f->have_gain || !f->measured || (f->doubt && !knob_turning(f)))
         return 0;                                     /* only when the position is trusted */
     double db = f->ldb[ring(f, f->t)];
     /* the stored frame this live frame should show: centre of the frame */
@@ -1087,7 +1104,7 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
     if (!cnt)
         return;
     if (!f->have_gain) {
-        f->gain = sum / (double)cnt;
+        f->gain = f->gain_slow = sum / (double)cnt;
         f->have_gain = 1;
     } else {
         /* a frame far below is a dropout or a pause, not the volume knob; and
@@ -1101,6 +1118,7 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
                 f->floor_min[b] += step;
             f->nf += step;
         }
+        f->gain_slow += GAIN_SLOW_ALPHA * (f->gain - f->gain_slow);
     }
 }
 
@@ -1494,7 +1512,8 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
      * may have jumped to a place that resembles this one (the same drums):
      * doubt the place, and let the search (with this place in its pool)
      * decide; only a lock ends the doubt */
-    if (!f->doubt && f->measured && !quiet && f->h_fast < f->h_slow - DOUBT_DROP && clear_music(f)) {
+    if (!f->doubt && f->measured && !quiet && f->h_fast < f->h_slow - DOUBT_DROP && clear_music(f)
+        && f->silent_run == 0) {
         f->doubt = 1;
         uint64_t back = f->opt.window / 2;
         start_search(f, f->t + 1 > back ? f->t + 1 - back : 0);
