@@ -40,7 +40,9 @@
  * verified twice in a row without a large correction, has lock_window live
  * frames behind it, and leads every other distinct place by lock_margin in
  * Fisher's z (more for windows shorter than verify_window: a short window
- * proves less), after at least one whole sweep: a repeated section with a
+ * proves less), each rival scored again on the very live frames behind the
+ * place (a score from a shorter window runs higher), after at least one
+ * whole sweep: a repeated section with a
  * near twin elsewhere does not lock until the music tells them apart.
  *
  * Pause. Where the stored music says the live frame should stand clearly
@@ -917,6 +919,27 @@ static cand *next_to_verify(mar_follow *f)
     return best;
 }
 
+/* Score of the line (p, r) on the newest `ages` live frames, as verify()
+ * scores it (the mean peak height of the two halves, the lower one if a
+ * half has no peak), without changing anything [1]. */
+static double score_on(mar_follow *f, double p, double r, size_t ages)
+{
+    long j0;
+    double center;
+    size_t m = ages >= f->opt.min_window ? resample(f, p, r, ages, &j0, &center) : 0;
+    if (m < 16)
+        return -1.0;
+    size_t h = m / 2;
+    double rho[2 * MAX_LAGS + 1], height[2], kappa;
+    int edge[2];
+    for (int half = 0; half < 2; half++) {
+        size_t k0 = half ? h : 0, len = half ? m - h : h;
+        correlate(f, f->rs, k0, len, j0, VERIFY_LAGS, rho);
+        peak(rho, VERIFY_LAGS, &height[half], &kappa, &edge[half]);
+    }
+    return edge[0] || edge[1] ? fmin(height[0], height[1]) : 0.5 * (height[0] + height[1]);
+}
+
 /* A correlation peak of height rho [1] and curvature kappa [1/tick^2] is
  * good and sharp enough to lock on. */
 static int lockable_peak(const mar_follow *f, double rho, double kappa)
@@ -952,12 +975,20 @@ static cand *lock_choice(mar_follow *f)
         cand *e = &f->pool[i];
         if (!e->used || e == best || fabs(e->p - best->p) < DISTINCT)
             continue;
-        if (isnan(e->fine)) {
-            if (e->coarse >= best->fine - COARSE_SLACK)
-                return NULL;                          /* a rival not looked at closely yet */
-        } else if (fisher(best->fine) - fisher(e->fine) < margin) {
+        if (isnan(e->fine) && e->coarse >= best->fine - COARSE_SLACK)
+            return NULL;                              /* a rival not looked at closely yet */
+    }
+    /* the rivals' scores came from windows of their own lengths; a longer
+     * window scores lower, so a rival (a twin of a repeated section) may
+     * look beaten only because more audio was held against it. Before the
+     * lock, each is scored again on the very frames that back this place. */
+    size_t ages = usable(f, best->since, f->opt.verify_window);
+    double zb = fisher(score_on(f, best->p, best->r, ages));
+    for (int i = 0; i < POOL; i++) {
+        cand *e = &f->pool[i];
+        if (e->used && e != best && fabs(e->p - best->p) >= DISTINCT && !isnan(e->fine)
+            && zb - fisher(score_on(f, e->p, e->r, ages)) < margin)
             return NULL;
-        }
     }
     return best;
 }
