@@ -42,8 +42,8 @@
  * Fisher's z (more for windows shorter than verify_window: a short window
  * proves less), each rival scored again on the very live frames behind the
  * place (a score from a shorter window runs higher), after at least one
- * whole sweep: a repeated section with a
- * near twin elsewhere does not lock until the music tells them apart.
+ * whole sweep: a repeated section with a near twin elsewhere does not lock
+ * until the music tells them apart.
  *
  * Pause. Where the stored music says the live frame should stand clearly
  * over the noise floor (the quietest live frame of the last 20 s, moved
@@ -52,10 +52,10 @@
  * and steady like hiss, for pause_after ticks: the recorder stopped. This
  * runs while the place is LOCKED or HOLDING on the flywheel (a quiet
  * passage or a volume turn can make the tracking unclear just before a
- * stop), not in doubt (below). The position goes back to where the silence began and holds (rate 0). Two
- * frames clearly above the silence (by a few of its own frame-to-frame
- * wobbles) resume it there, from the start of the rise;
- * the resumed place is on probation (HOLDING, search beside). A near search
+ * stop), not in doubt (below). The position goes back to where the silence
+ * began and holds (rate 0). Two frames clearly above the silence (by a few
+ * of its own frame-to-frame wobbles) resume it there, from the start of the
+ * rise; the resumed place is on probation (HOLDING, search beside). A near search
  * correlates the frames since the restart at lags of up to 1 s around it
  * and locks on a clear peak there (a deck that backs up on restart, a stop
  * placed a little late); without one the tracker confirms the place after
@@ -817,6 +817,35 @@ static void sweep(mar_follow *f)
     }
 }
 
+/* The correlation peaks of the older (0) and the newer (1) half of the
+ * newest `ages` live frames along the line (p, r), at lags up to
+ * VERIFY_LAGS: lag [ticks], height [1], curvature kappa [1/tick^2], edge
+ * (no peak), and ctr, the live age (+ 0.5) at the half's middle [ticks].
+ * Returns 0 when there is too little audio for it. */
+typedef struct {
+    double lag, height, kappa, ctr;
+    int edge;
+} half_peak;
+
+static int half_peaks(mar_follow *f, double p, double r, size_t ages, half_peak hp[2])
+{
+    long j0;
+    double center;
+    size_t m = ages >= f->opt.min_window ? resample(f, p, r, ages, &j0, &center) : 0;
+    if (m < 16)
+        return 0;
+    size_t h = m / 2;
+    double rho[2 * MAX_LAGS + 1];
+    for (int half = 0; half < 2; half++) {
+        size_t k0 = half ? h : 0, len = half ? m - h : h;
+        correlate(f, f->rs, k0, len, j0, VERIFY_LAGS, rho);
+        hp[half].lag = peak(rho, VERIFY_LAGS, &hp[half].height, &hp[half].kappa, &hp[half].edge);
+        double jmid = (double)j0 + (double)k0 + 0.5 * (double)(len - 1);
+        hp[half].ctr = (p - 0.5 - jmid) / r;
+    }
+    return 1;
+}
+
 /* Full-resolution check of a pool entry: the lags of the older and the
  * newer half of its window correct its position and rate; their mean
  * correlation is its score. */
@@ -825,56 +854,42 @@ static void verify(mar_follow *f, cand *e)
     e->checked = f->t;
     size_t ages = usable(f, e->since, f->opt.verify_window);
     e->frames = ages;
-    long j0;
-    double center;
-    size_t m = ages >= f->opt.min_window ? resample(f, e->p, e->r, ages, &j0, &center) : 0;
-    if (m < 16) {
+    half_peak hp[2];
+    if (!half_peaks(f, e->p, e->r, ages, hp)) {
         e->fine = NAN;
         return;
     }
-    size_t h = m / 2;
-    double rho[2 * MAX_LAGS + 1], lag[2], height[2], ctr[2], kappa[2];
-    int edge[2];
-    for (int half = 0; half < 2; half++) {
-        size_t k0 = half ? h : 0, len = half ? m - h : h;
-        correlate(f, f->rs, k0, len, j0, VERIFY_LAGS, rho);
-        lag[half] = peak(rho, VERIFY_LAGS, &height[half], &kappa[half], &edge[half]);
-        /* live age (+ 0.5) at the half's middle stored frame */
-        double jmid = (double)j0 + (double)k0 + 0.5 * (double)(len - 1);
-        ctr[half] = (e->p - 0.5 - jmid) / e->r;
-    }
-    (void)center;
-    e->kappa = fmin(kappa[0], kappa[1]);
-    /* half 0 is the older (smaller stored index) */
-    if (edge[1] || height[1] < f->opt.track_threshold) {
-        e->fine = fmin(height[0], height[1]);
+    const half_peak older = hp[0], newer = hp[1];     /* older: the smaller stored indices */
+    e->kappa = fmin(older.kappa, newer.kappa);
+    if (newer.edge || newer.height < f->opt.track_threshold) {
+        e->fine = fmin(older.height, newer.height);
         e->confirmed = 0;
-        if (!edge[1])
-            e->p += lag[1];
+        if (!newer.edge)
+            e->p += newer.lag;
         return;
     }
-    if (edge[0] || height[0] < f->opt.track_threshold) {
+    if (older.edge || older.height < f->opt.track_threshold) {
         /* the older half does not fit (the tape jumped, or the place is wrong):
          * keep only the newer frames from now on */
-        e->p += lag[1];
+        e->p += newer.lag;
         e->since = f->t + 1 - (ages - ages / 2);
-        e->fine = 0.5 * (height[0] + height[1]);
+        e->fine = 0.5 * (older.height + newer.height);
         e->confirmed = 0;
         return;
     }
-    double er = (lag[1] - lag[0]) / (ctr[0] - ctr[1]);   /* rate error [stored ticks per tick] */
+    double er = (newer.lag - older.lag) / (older.ctr - newer.ctr);  /* rate error [stored ticks per tick] */
     if (er > 0.03)
         er = 0.03;
     if (er < -0.03)
         er = -0.03;
-    double ep = lag[1] + er * ctr[1];                     /* position error now [ticks] */
+    double ep = newer.lag + er * newer.ctr;                   /* position error now [ticks] */
     e->p += ep;
     e->r += er;
     if (e->r < f->opt.rate_min)
         e->r = f->opt.rate_min;
     if (e->r > f->opt.rate_max)
         e->r = f->opt.rate_max;
-    e->fine = 0.5 * (height[0] + height[1]);
+    e->fine = 0.5 * (older.height + newer.height);
     if (fabs(ep) < 1.0 && fabs(er) < 0.004)
         e->confirmed++;
     else
@@ -924,20 +939,11 @@ static cand *next_to_verify(mar_follow *f)
  * half has no peak), without changing anything [1]. */
 static double score_on(mar_follow *f, double p, double r, size_t ages)
 {
-    long j0;
-    double center;
-    size_t m = ages >= f->opt.min_window ? resample(f, p, r, ages, &j0, &center) : 0;
-    if (m < 16)
+    half_peak hp[2];
+    if (!half_peaks(f, p, r, ages, hp))
         return -1.0;
-    size_t h = m / 2;
-    double rho[2 * MAX_LAGS + 1], height[2], kappa;
-    int edge[2];
-    for (int half = 0; half < 2; half++) {
-        size_t k0 = half ? h : 0, len = half ? m - h : h;
-        correlate(f, f->rs, k0, len, j0, VERIFY_LAGS, rho);
-        peak(rho, VERIFY_LAGS, &height[half], &kappa, &edge[half]);
-    }
-    return edge[0] || edge[1] ? fmin(height[0], height[1]) : 0.5 * (height[0] + height[1]);
+    return hp[0].edge || hp[1].edge ? fmin(hp[0].height, hp[1].height)
+                                    : 0.5 * (hp[0].height + hp[1].height);
 }
 
 /* A correlation peak of height rho [1] and curvature kappa [1/tick^2] is

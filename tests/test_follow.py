@@ -173,7 +173,7 @@ def test_the_twin_of_a_repeated_section_is_not_locked_on(deck):
     right place, and a shorter window scores higher. Every lock must now be
     at the right place."""
     piece = synthesize("ambient", seed=3)
-    track, played, err, f = live_track(piece, loudness(piece.samples, piece.sample_rate), deck)
+    track, _, err, _ = live_track(piece, loudness(piece.samples, piece.sample_rate), deck)
     entered = lock_entries(track)
     assert len(entered) >= 1
     assert np.all(np.abs(err[entered]) <= 0.2), err[entered]
@@ -248,7 +248,7 @@ def test_a_stop_soon_after_a_volume_turn_is_caught(piece, stored):
         gain = ((0.0, 0.0), (turn, 0.0), (turn + 2.0, float(rng.choice([-20.0, 20.0]))))
         deck = Deck(speed=rng.uniform(0.96, 1.04), snr_db=20.0, start=start, gain_db=gain,
                     pauses=((stop, pause),), seconds=stop + pause + 6.0, seed=seed)
-        track, played, err, f = live_track(piece, stored, deck)
+        track, _, err, _ = live_track(piece, stored, deck)
         t = np.arange(len(err)) * T
         if abs(err[int((stop - 0.1) / T)]) > 0.05:
             continue

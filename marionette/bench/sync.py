@@ -168,8 +168,11 @@ def summarize(rows: list[dict]) -> dict:
     pauses = [x for r in rows for x in r["relock_pause"]]
     jumps = [x for r in rows for x in r["relock_jump"]]
     q = lambda a, p: float(np.quantile(a, p)) if len(a) else float("nan")      # noqa: E731
-    # times may be inf (never): take an observed value, do not interpolate
-    q_time = lambda a, p: float(np.quantile(a, p, method="nearest")) if len(a) else float("nan")  # noqa: E731
+
+    def q_time(a, p):
+        """Quantile of times that may be inf (never): an observed value, not interpolated."""
+        return float(np.quantile(a, p, method="nearest")) if len(a) else float("nan")
+
     return {
         "within20": float(np.mean(e <= 0.020)) if len(e) else float("nan"),
         "within50": float(np.mean(e <= 0.050)) if len(e) else float("nan"),
