@@ -41,9 +41,10 @@
  * frames behind it, and leads every other distinct place by lock_margin in
  * Fisher's z (more for windows shorter than verify_window: a short window
  * proves less), each rival scored again on the very live frames behind the
- * place (a score from a shorter window runs higher), after at least one
- * whole sweep: a repeated section with a near twin elsewhere does not lock
- * until the music tells them apart.
+ * place (a score from a shorter window runs higher), the last sweep's best
+ * places among the rivals even when the pool had no room for them, after
+ * at least one whole sweep: a repeated section with a near twin elsewhere
+ * does not lock until the music tells them apart.
  *
  * Pause. Where the stored music says the live frame should stand clearly
  * over the noise floor (the quietest live frame of the last 20 s, moved
@@ -79,6 +80,7 @@
 #include <string.h>
 
 #define POOL 16                 /* search candidates kept */
+#define PEAKS 8                 /* a sweep's best places kept for the lock check, pool or not */
 #define MAX_RATES 64            /* rate grid size limit */
 #define TRACK_LAGS 3            /* tracking lags -3..3 [ticks] */
 #define VERIFY_LAGS 6           /* verification lags -6..6 [ticks] */
@@ -129,6 +131,13 @@
 #define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */
 #define NEAR_TICKS 250          /* the near search gives up this long after the restart [ticks] */
 #define NEAR_SEP 4              /* a rival peak of the near search lies at least this far away [ticks] */
+
+typedef struct {
+    double p;                   /* position at step t [stored ticks] */
+    double score;               /* its coarse score [1] */
+    uint64_t t;
+    int used;
+} sweep_peak;
 
 typedef struct {
     double p, r;                /* position now [stored ticks], rate [stored ticks per tick] */
@@ -216,6 +225,8 @@ struct mar_follow {
     double rates[MAX_RATES];
     size_t sweep_o, sweep_k;
     uint64_t sweep_id, sweeps_done;
+    sweep_peak peaks[PEAKS];    /* the best local maxima of the sweep under way ... */
+    sweep_peak last_peaks[PEAKS];  /* ... and of the last complete one */
     double prev2_score, prev_score, here_score;   /* best coarse score at offsets o - 2, o - 1, o */
     double prev_rate, here_rate;
     size_t m_eff;               /* search window of this tick [coarse blocks] */
@@ -475,6 +486,8 @@ static void start_search(mar_follow *f, uint64_t from)
     f->searching = 1;
     f->search_from = from > f->seg_start ? from : f->seg_start;
     clear_pool(f);
+    memset(f->peaks, 0, sizeof f->peaks);
+    memset(f->last_peaks, 0, sizeof f->last_peaks);
     f->sweep_o = 1;
     f->sweep_k = 0;
     f->sweep_id++;
@@ -783,6 +796,27 @@ static void offer(mar_follow *f, double p, double r, double score)
     slot->checked = f->t;
 }
 
+/* A local maximum of the sweep at p (now) [stored ticks]: kept if among the
+ * PEAKS best, one per place. The pool may have no room for it, but a lock
+ * elsewhere must still beat it. */
+static void note_peak(mar_follow *f, double p, double score)
+{
+    sweep_peak *slot = NULL;
+    for (int i = 0; i < PEAKS; i++) {
+        sweep_peak *k = &f->peaks[i];
+        if (k->used && fabs(k->p + (double)(f->t - k->t) - p) < DISTINCT) {
+            if (score > k->score)
+                k->p = p, k->score = score, k->t = f->t;
+            return;
+        }
+        if (!slot || !k->used || (slot->used && k->score < slot->score))
+            slot = k;
+    }
+    if (slot->used && slot->score >= score)
+        return;
+    slot->p = p, slot->score = score, slot->t = f->t, slot->used = 1;
+}
+
 /* Score the next search_budget (offset, rate) pairs of the sweep. Per
  * offset the best rate counts; only local maxima over offsets are offered. */
 static void sweep(mar_follow *f)
@@ -790,8 +824,12 @@ static void sweep(mar_follow *f)
     size_t budget = f->opt.search_budget;
     while (budget > 0) {
         if (f->sweep_o > f->nc) {                     /* a sweep is complete */
-            if (f->prev_score >= SEARCH_MIN_SCORE && f->prev_score > f->prev2_score)
+            if (f->prev_score >= SEARCH_MIN_SCORE && f->prev_score > f->prev2_score) {
                 offer(f, (double)((f->sweep_o - 1) * f->D), f->prev_rate, f->prev_score);
+                note_peak(f, (double)((f->sweep_o - 1) * f->D), f->prev_score);
+            }
+            memcpy(f->last_peaks, f->peaks, sizeof f->peaks);
+            memset(f->peaks, 0, sizeof f->peaks);
             f->sweeps_done++;
             f->sweep_id++;
             f->sweep_o = 1;
@@ -805,8 +843,10 @@ static void sweep(mar_follow *f)
         budget--;
         if (++f->sweep_k >= f->n_rates) {             /* offset o done: was o - 1 a peak? */
             if (f->prev_score >= SEARCH_MIN_SCORE && f->prev_score >= f->prev2_score
-                && f->prev_score > f->here_score)
+                && f->prev_score > f->here_score) {
                 offer(f, (double)((f->sweep_o - 1) * f->D), f->prev_rate, f->prev_score);
+                note_peak(f, (double)((f->sweep_o - 1) * f->D), f->prev_score);
+            }
             f->prev2_score = f->prev_score;
             f->prev_score = f->here_score;
             f->prev_rate = f->here_rate;
@@ -994,6 +1034,15 @@ static cand *lock_choice(mar_follow *f)
         cand *e = &f->pool[i];
         if (e->used && e != best && fabs(e->p - best->p) >= DISTINCT && !isnan(e->fine)
             && zb - fisher(score_on(f, e->p, e->r, ages)) < margin)
+            return NULL;
+    }
+    /* and so is each of the last sweep's best places, at this place's rate
+     * (the pool may have had no room for the right one) */
+    for (int i = 0; i < PEAKS; i++) {
+        const sweep_peak *k = &f->last_peaks[i];
+        double p = k->p + best->r * (double)(f->t - k->t);
+        if (k->used && fabs(p - best->p) >= DISTINCT
+            && zb - fisher(score_on(f, p, best->r, ages)) < margin)
             return NULL;
     }
     return best;

@@ -179,6 +179,26 @@ def test_the_twin_of_a_repeated_section_is_not_locked_on(deck):
     assert np.all(np.abs(err[entered]) <= 0.2), err[entered]
 
 
+@pytest.mark.parametrize("style,seed,deck", [
+    ("pop", 1, Deck(speed=0.94, wow=0.005, wow_hz=1.0, flutter=0.002, flutter_hz=10.0, snr_db=30.0,
+                    reverb_s=0.3, start=19.19127906823751, jump=(43.11796526543097, 42.29273604099656),
+                    sample_rate=22050, seed=205)),
+    ("techno", 4, Deck(speed=1.06, wow=0.001, wow_hz=0.9, snr_db=20.0, start=28.94162551195993,
+                       gain_db=((0.0, 0.0), (38.19079246832746, 0.0), (40.19079246832746, 20.0)),
+                       pauses=((70.41266798913429, 5.770421344105322),), sample_rate=11025, seconds=60.0,
+                       seed=20261426))], ids=["pop", "techno"])
+def test_a_first_lock_beats_places_the_pool_had_no_room_for(style, seed, deck):
+    """Repetitive music: after 2-4 s more than 16 places score high, and the
+    right one may not be in the search's pool at all. Two decks (from bench
+    sync seeds 202 and 20261124) on which the follower used to lock 34 s and
+    135 s off: a lock must also beat the last sweep's best places."""
+    piece = synthesize(style, seed=seed)
+    track, _, err, _ = live_track(piece, loudness(piece.samples, piece.sample_rate), deck)
+    entered = lock_entries(track)
+    assert len(entered) >= 1
+    assert np.all(np.abs(err[entered]) <= 0.2), err[entered]
+
+
 def test_a_jump_into_alike_music_is_not_taken_for_a_pause(piece, stored):
     """The tape jumps from the end of a verse to the end of a chorus (the
     same drums, then the quiet break): the follower must not read the
