@@ -135,7 +135,7 @@
 typedef struct {
     double p;                   /* position at step t [stored ticks] */
     double score;               /* its coarse score [1] */
-    uint64_t t;
+    uint64_t t;                 /* step it was found */
     int used;
 } sweep_peak;
 
@@ -809,8 +809,8 @@ static void note_peak(mar_follow *f, double p, double score)
                 k->p = p, k->score = score, k->t = f->t;
             return;
         }
-        if (!slot || !k->used || (slot->used && k->score < slot->score))
-            slot = k;
+        if (!slot || (slot->used && (!k->used || k->score < slot->score)))
+            slot = k;                                 /* a free entry, else the weakest */
     }
     if (slot->used && slot->score >= score)
         return;
