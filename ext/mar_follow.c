@@ -23,6 +23,8 @@
  * (quiet, sustained music), so such windows barely move the estimate; a
  * window that is too quiet, correlates too little or lands outside the
  * gate is not used: the position runs on at the rate (flywheel, HOLDING).
+ * Once a bad stretch has started the search beside, REGAIN_TICKS fitting
+ * measurements in a row end the hold, not one.
  *
  * Paper mode. Same correlation at lags -1, 0, +1 and rate 1: the position
  * (whole ticks) advances by 0, 1 or 2, i.e. one stored sample is doubled
@@ -121,6 +123,7 @@
 #define DOUBT_DROP 0.25         /* short-run height this far under the long-run one: doubt the place [1] */
 #define CLEAR_DB 15.0           /* doubt only where the live music averages this far over the noise floor [dB] */
 #define NEUTRAL_DB 1.0          /* a frame within this of a silent run's level range ... */
+#define REGAIN_TICKS 25         /* measurements in a row that end a hold with the search beside [ticks] */
 #define PROBATION_BAD 10        /* bad ticks in probation (after a resume) that send the place back to the search */
 #define ONSET_DB 1.5            /* resume: the music began at the first frame of the run this far over the silence [dB] */
 #define ONSET_SIGMAS 4.0        /* ... or this many of the silence's frame-to-frame deviations */
@@ -206,6 +209,9 @@ struct mar_follow {
     double pause_dev;           /* the silence's mean frame-to-frame deviation in a pause [dB] */
     double h_slow, h_fast;      /* tracking peak heights: long-run, short-run average [1] */
     int doubt;                  /* the tracking correlation collapsed in music: search beside, keep it going */
+    int regaining;              /* the tracking went bad long enough to start the search beside: ... */
+    uint64_t regain_ok;         /* ... not LOCKED again until this many measurements in a row fit, */
+    uint64_t regain_bad;        /* ... and lost after this many bad ones in all [ticks] */
     int probation;              /* resumed from a pause: not LOCKED until the place is confirmed */
     uint64_t probation_ok;      /* accepted measurements since the resume */
     uint64_t pause_start;       /* step the pause was detected */
@@ -515,7 +521,7 @@ void mar_follow_reset(mar_follow *f, double position)
     f->last_good = f->t;
     f->seg_start = f->t + 1;          /* older frames belong to another stretch of tape */
     f->have_gain = 0;
-    f->doubt = f->probation = f->near = 0;
+    f->doubt = f->probation = f->near = f->regaining = 0;
     f->h_slow = f->h_fast = 0.0;
     stop_search(f);
     if (isfinite(position)) {
@@ -1323,7 +1329,7 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->low_run = f->silent_run = 0;
     f->conf = (e->fine - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->measured = 0;
-    f->doubt = f->probation = 0;
+    f->doubt = f->probation = f->regaining = 0;
     f->h_slow = f->h_fast = e->fine;
     f->have_gain = 0;
     update_gain(f, f->p, f->r, f->opt.verify_window);
@@ -1533,7 +1539,7 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
     f->seg_start = onset;
     f->probation = 1;
     f->probation_ok = 0;
-    f->doubt = 0;
+    f->doubt = f->regaining = 0;
     f->h_fast = f->h_slow;
     f->state = MAR_FOLLOW_HOLDING;
     f->measured = 0;
@@ -1583,6 +1589,7 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         f->c.measurements++;
         f->last_good = f->t;
         f->bad_since = f->quiet_since = 0;
+        f->regain_ok++;
     } else if (quiet || !have) {
         f->quiet_since++;
         f->conf *= 0.99;
@@ -1590,6 +1597,15 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         f->c.rejected++;
         f->bad_since++;
         f->conf *= 0.97;
+        f->regain_ok = 0;
+        f->regain_bad++;
+    }
+    /* one fitting measurement after a long bad stretch proves little (hiss
+     * against a wrong place can pass): a run of them ends the hold */
+    if (f->regaining && f->regain_ok >= REGAIN_TICKS) {
+        f->regaining = 0;
+        if (!f->doubt && !f->probation)
+            stop_search(f);
     }
     if (quiet == 1)
         *flags |= MAR_FOLLOW_F_QUIET;
@@ -1612,24 +1628,27 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         && !f->doubt)
         f->probation = 0;
     /* LOCKED: a measurement confirmed the place since the last (re)start, recently */
-    f->state = since <= f->opt.hold_after && f->measured && !f->doubt && !f->probation
+    f->state = since <= f->opt.hold_after && f->measured && !f->doubt && !f->probation && !f->regaining
         ? MAR_FOLLOW_LOCKED : MAR_FOLLOW_HOLDING;
     /* frames from well before the measurements went bad may belong to
      * another place of the tape (a jump): the search starts after them */
     uint64_t bad_start = f->t + 1 - f->bad_since;
     uint64_t from = bad_start > f->opt.min_window ? bad_start - f->opt.min_window : 0;
     if ((double)f->bad_since >= f->opt.lost_after || since >= f->opt.quiet_lost_after
-        || (f->probation && f->bad_since >= PROBATION_BAD)) {
+        || (f->probation && f->bad_since >= PROBATION_BAD)
+        || (f->regaining && (double)f->regain_bad >= f->opt.lost_after)) {
         uint64_t at = f->probation && f->seg_start > from ? f->seg_start : from;
         f->state = MAR_FOLLOW_SEARCHING;
-        f->probation = f->doubt = 0;
+        f->probation = f->doubt = f->regaining = 0;
         stop_search(f);
         start_search(f, at);
     } else if ((double)f->bad_since >= f->opt.search_after) {
         start_search(f, from);
+        if (!f->regaining)
+            f->regaining = 1, f->regain_ok = 0, f->regain_bad = f->bad_since;
     } else if (f->probation) {
         start_search(f, f->seg_start);
-    } else if (ok && f->searching && !f->doubt) {
+    } else if (ok && f->searching && !f->doubt && !f->regaining) {
         stop_search(f);
     }
 }

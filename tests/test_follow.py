@@ -199,6 +199,23 @@ def test_a_first_lock_beats_places_the_pool_had_no_room_for(style, seed, deck):
     assert np.all(np.abs(err[entered]) <= 0.2), err[entered]
 
 
+def test_one_fitting_measurement_after_a_long_bad_stretch_does_not_relock():
+    """The tape jumps 12 s ahead in the ambient piece (bench sync seed
+    20261123). The tracker, still at the old place, used to find one
+    measurement that passed a second later and went back to LOCKED 13.5 s
+    off. After a stretch of bad measurements long enough to start the
+    search beside, the place must fit REGAIN_TICKS measurements in a row
+    before it is LOCKED again."""
+    piece = synthesize("ambient", seed=3)
+    deck = Deck(speed=0.94, wow=0.005, wow_hz=1.0, flutter=0.002, flutter_hz=10.0, snr_db=30.0,
+                reverb_s=0.3, start=1.7486197521972227, jump=(53.892387571690605, 65.8302234171546),
+                sample_rate=22050, seed=20261326)
+    track, _, err, _ = live_track(piece, loudness(piece.samples, piece.sample_rate), deck)
+    entered = lock_entries(track)
+    assert len(entered) >= 2                                  # before and after the jump
+    assert np.all(np.abs(err[entered]) <= 0.2), err[entered]
+
+
 def test_a_jump_into_alike_music_is_not_taken_for_a_pause(piece, stored):
     """The tape jumps from the end of a verse to the end of a chorus (the
     same drums, then the quiet break): the follower must not read the
