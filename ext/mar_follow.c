@@ -823,6 +823,15 @@ static void note_peak(mar_follow *f, double p, double score)
     slot->p = p, slot->score = score, slot->t = f->t, slot->used = 1;
 }
 
+/* Offset sweep_o - 1 is a local maximum of the sweep: into the pool (if it
+ * has room) and among the sweep's best places. */
+static void peak_at_prev(mar_follow *f)
+{
+    double p = (double)((f->sweep_o - 1) * f->D);
+    offer(f, p, f->prev_rate, f->prev_score);
+    note_peak(f, p, f->prev_score);
+}
+
 /* Score the next search_budget (offset, rate) pairs of the sweep. Per
  * offset the best rate counts; only local maxima over offsets are offered. */
 static void sweep(mar_follow *f)
@@ -830,10 +839,8 @@ static void sweep(mar_follow *f)
     size_t budget = f->opt.search_budget;
     while (budget > 0) {
         if (f->sweep_o > f->nc) {                     /* a sweep is complete */
-            if (f->prev_score >= SEARCH_MIN_SCORE && f->prev_score > f->prev2_score) {
-                offer(f, (double)((f->sweep_o - 1) * f->D), f->prev_rate, f->prev_score);
-                note_peak(f, (double)((f->sweep_o - 1) * f->D), f->prev_score);
-            }
+            if (f->prev_score >= SEARCH_MIN_SCORE && f->prev_score > f->prev2_score)
+                peak_at_prev(f);
             memcpy(f->last_peaks, f->peaks, sizeof f->peaks);
             memset(f->peaks, 0, sizeof f->peaks);
             f->sweeps_done++;
@@ -849,10 +856,8 @@ static void sweep(mar_follow *f)
         budget--;
         if (++f->sweep_k >= f->n_rates) {             /* offset o done: was o - 1 a peak? */
             if (f->prev_score >= SEARCH_MIN_SCORE && f->prev_score >= f->prev2_score
-                && f->prev_score > f->here_score) {
-                offer(f, (double)((f->sweep_o - 1) * f->D), f->prev_rate, f->prev_score);
-                note_peak(f, (double)((f->sweep_o - 1) * f->D), f->prev_score);
-            }
+                && f->prev_score > f->here_score)
+                peak_at_prev(f);
             f->prev2_score = f->prev_score;
             f->prev_score = f->here_score;
             f->prev_rate = f->here_rate;
@@ -980,9 +985,11 @@ static cand *next_to_verify(mar_follow *f)
     return best;
 }
 
-/* Score of the line (p, r) on the newest `ages` live frames, as verify()
- * scores it (the mean peak height of the two halves, the lower one if a
- * half has no peak), without changing anything [1]. */
+/* Score of the line (p, r) on the newest `ages` live frames, without
+ * changing anything [1]: the mean peak height of the two halves, the lower
+ * one if either half has no peak. (verify() differs: it takes the lower one
+ * when the newer half has no peak or a low one, the mean when only the
+ * older half fails, as that half may predate a jump.) */
 static double score_on(mar_follow *f, double p, double r, size_t ages)
 {
     half_peak hp[2];

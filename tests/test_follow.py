@@ -10,6 +10,7 @@ Positions are compared in seconds of taught music; no timing assertions.
 """
 from __future__ import annotations
 
+import functools
 import math
 import shutil
 import subprocess
@@ -63,6 +64,20 @@ def lock_entries(track):
     """Ticks at which the follower entered LOCKED (from any other state)."""
     before = np.concatenate([[-1], track.state[:-1]])
     return np.flatnonzero((track.state == LOCKED) & (before != LOCKED))
+
+
+@functools.cache
+def taught(style, seed):
+    """A synthesized piece and its stored loudness, made once per session."""
+    piece = synthesize(style, seed=seed)
+    return piece, loudness(piece.samples, piece.sample_rate)
+
+
+def lock_errors(style, seed, deck):
+    """Errors [s] at the ticks the follower entered LOCKED, over the deck's
+    recording of the synthesized piece (style, seed)."""
+    track, _, err, _ = live_track(*taught(style, seed), deck)
+    return err[lock_entries(track)]
 
 def test_c_follower_under_asan_ubsan_without_step_allocations(tmp_path):
     if shutil.which("gcc") is None:
@@ -172,11 +187,9 @@ def test_the_twin_of_a_repeated_section_is_not_locked_on(deck):
     lock on the twin: the twin had been scored on a shorter window than the
     right place, and a shorter window scores higher. Every lock must now be
     at the right place."""
-    piece = synthesize("ambient", seed=3)
-    track, _, err, _ = live_track(piece, loudness(piece.samples, piece.sample_rate), deck)
-    entered = lock_entries(track)
-    assert len(entered) >= 1
-    assert np.all(np.abs(err[entered]) <= 0.2), err[entered]
+    errors = lock_errors("ambient", 3, deck)
+    assert len(errors) >= 1
+    assert np.all(np.abs(errors) <= 0.2), errors
 
 
 @pytest.mark.parametrize("style,seed,deck", [
@@ -192,11 +205,9 @@ def test_a_first_lock_beats_places_the_pool_had_no_room_for(style, seed, deck):
     right one may not be in the search's pool at all. Two decks (from bench
     sync seeds 202 and 20261124) on which the follower used to lock 34 s and
     135 s off: a lock must also beat the last sweep's best places."""
-    piece = synthesize(style, seed=seed)
-    track, _, err, _ = live_track(piece, loudness(piece.samples, piece.sample_rate), deck)
-    entered = lock_entries(track)
-    assert len(entered) >= 1
-    assert np.all(np.abs(err[entered]) <= 0.2), err[entered]
+    errors = lock_errors(style, seed, deck)
+    assert len(errors) >= 1
+    assert np.all(np.abs(errors) <= 0.2), errors
 
 
 def test_one_fitting_measurement_after_a_long_bad_stretch_does_not_relock():
@@ -206,14 +217,12 @@ def test_one_fitting_measurement_after_a_long_bad_stretch_does_not_relock():
     off. After a stretch of bad measurements long enough to start the
     search beside, the place must fit REGAIN_TICKS measurements in a row
     before it is LOCKED again."""
-    piece = synthesize("ambient", seed=3)
     deck = Deck(speed=0.94, wow=0.005, wow_hz=1.0, flutter=0.002, flutter_hz=10.0, snr_db=30.0,
                 reverb_s=0.3, start=1.7486197521972227, jump=(53.892387571690605, 65.8302234171546),
                 sample_rate=22050, seed=20261326)
-    track, _, err, _ = live_track(piece, loudness(piece.samples, piece.sample_rate), deck)
-    entered = lock_entries(track)
-    assert len(entered) >= 2                                  # before and after the jump
-    assert np.all(np.abs(err[entered]) <= 0.2), err[entered]
+    errors = lock_errors("ambient", 3, deck)
+    assert len(errors) >= 2                                   # before and after the jump
+    assert np.all(np.abs(errors) <= 0.2), errors
 
 
 def test_a_jump_into_alike_music_is_not_taken_for_a_pause(piece, stored):
