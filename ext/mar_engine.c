@@ -84,8 +84,15 @@ static int check_axis(const mar_axis *a)
     return 0;
 }
 
+/* A live frame as it waits in the input ring. */
+typedef struct {
+    double loudness;            /* [full scale] */
+    double onset;               /* onset strength [dB], NaN when the source has none */
+} live_frame;
+
 mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axes, size_t n_axes,
-                              const double *show, size_t n_ticks, const double *loudness, int *status)
+                              const double *show, size_t n_ticks, const double *loudness,
+                              const double *onsets, int *status)
 {
     *status = -EINVAL;
     if (n_axes == 0 || n_ticks == 0 || !(opt->period > 0.0) || opt->period > 10.0)
@@ -148,9 +155,10 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
     if (ok && opt->record_slots > 0)
         ok = (*status = mar_ring_init(&e->records, mar_engine_record_size(e), opt->record_slots)) == 0;
     if (ok)
-        ok = (*status = mar_ring_init(&e->loudness_in, sizeof(double), opt->loudness_slots)) == 0;
-    if (ok && opt->follow)      /* refuses a show without finite, non-negative loudness */
-        ok = (e->follow = mar_follow_create(&opt->follow_opt, e->loudness, n_ticks, status)) != NULL;
+        ok = (*status = mar_ring_init(&e->loudness_in, sizeof(live_frame), opt->loudness_slots)) == 0;
+    if (ok && opt->follow)      /* refuses a show without finite, non-negative loudness (and onsets) */
+        ok = (e->follow = mar_follow_create_onsets(&opt->follow_opt, e->loudness, onsets, n_ticks,
+                                                   status)) != NULL;
     if (!ok) {
         mar_engine_destroy(e);
         return NULL;
@@ -194,10 +202,11 @@ void mar_engine_destroy(mar_engine *e)
  * came; older ones are dropped. */
 static double newest_live_loudness(mar_engine *e)
 {
-    double frames[16], newest = NAN;
+    live_frame frames[16];
+    double newest = NAN;
     size_t n;
     while ((n = mar_ring_pop(&e->loudness_in, frames, 16)) > 0)
-        newest = frames[n - 1];
+        newest = frames[n - 1].loudness;
     return newest;
 }
 
@@ -211,17 +220,18 @@ static double newest_live_loudness(mar_engine *e)
  * newest frame taken, NaN if none. */
 static double follow_music(mar_engine *e, int64_t elapsed_periods, int seek, double seek_to)
 {
-    double frames[FOLLOW_FRAMES_PER_TICK], newest = NAN;
+    live_frame frames[FOLLOW_FRAMES_PER_TICK];
+    double newest = NAN;
     if (seek)
         mar_follow_reset(e->follow, seek_to);
     size_t n = mar_ring_pop(&e->loudness_in, frames, FOLLOW_FRAMES_PER_TICK);
     e->follow_flags = 0;
     for (size_t i = 0; i < n; i++) {
-        mar_follow_step(e->follow, frames[i], &e->follow_out);
+        mar_follow_step_onset(e->follow, frames[i].loudness, frames[i].onset, &e->follow_out);
         e->follow_flags |= e->follow_out.flags;
     }
     if (n > 0) {
-        newest = frames[n - 1];
+        newest = frames[n - 1].loudness;
         e->ticks_since_frame = 0;
     } else {
         e->ticks_since_frame += elapsed_periods;
@@ -441,11 +451,17 @@ int mar_engine_seek(mar_engine *e, double position)
 
 int mar_engine_push_loudness(mar_engine *e, double value)
 {
-    if (!isfinite(value) || value < 0.0) {
+    return mar_engine_push_frame(e, value, NAN);
+}
+
+int mar_engine_push_frame(mar_engine *e, double value, double onset)
+{
+    if (!isfinite(value) || value < 0.0 || !(isnan(onset) || (isfinite(onset) && onset >= 0.0))) {
         atomic_fetch_add(&e->bad_input, 1);
         return -EINVAL;
     }
-    return mar_ring_push(&e->loudness_in, &value, sizeof value);
+    live_frame frame = {.loudness = value, .onset = onset};
+    return mar_ring_push(&e->loudness_in, &frame, sizeof frame);
 }
 
 void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask)

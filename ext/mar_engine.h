@@ -93,10 +93,13 @@ typedef struct {
 
 typedef struct mar_engine mar_engine;
 
-/* Copies axes, show (n_axes rows of n_ticks positions [unit]) and loudness
- * (n_ticks values). On failure returns NULL and sets *status. */
+/* Copies axes, show (n_axes rows of n_ticks positions [unit]), loudness
+ * (n_ticks values) and onsets (n_ticks onset strengths [dB], or NULL: the
+ * follower tracks on the loudness alone). On failure returns NULL and sets
+ * *status. */
 mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axes, size_t n_axes,
-                              const double *show, size_t n_ticks, const double *loudness, int *status);
+                              const double *show, size_t n_ticks, const double *loudness,
+                              const double *onsets, int *status);
 void mar_engine_destroy(mar_engine *e);
 
 /* One tick at time now_ns [ns], elapsed_periods (>= 1) periods after the
@@ -111,6 +114,8 @@ int mar_engine_step(mar_engine *e, uint64_t n);
 int mar_engine_set_rate(mar_engine *e, double rate);      /* [show ticks per tick] */
 int mar_engine_seek(mar_engine *e, double position);      /* [show ticks] */
 int mar_engine_push_loudness(mar_engine *e, double value);   /* one 20 ms frame, >= 0 */
+/* The same with the frame's onset strength [dB] (>= 0; NaN: the source has none) */
+int mar_engine_push_frame(mar_engine *e, double value, double onset);
 void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask); /* copied into every record */
 
 /* Ask for a move (enum mar_request); targets [unit] has n_axes values for

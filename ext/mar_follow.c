@@ -46,7 +46,9 @@
  * place (a score from a shorter window runs higher), the last sweep's best
  * places among the rivals even when the pool had no room for them, after
  * at least one whole sweep: a repeated section with a near twin elsewhere
- * does not lock until the music tells them apart.
+ * does not lock until the music tells them apart. With onsets, the line a
+ * lock takes moves halfway to the one the onset feature's half windows
+ * measure (second_opinion).
  *
  * Pause. Where the stored music says the live frame should stand clearly
  * over the noise floor (the quietest live frame of the last 20 s, moved
@@ -61,9 +63,11 @@
  * rise; the resumed place is on probation (HOLDING, search beside). A near search
  * correlates the frames since the restart at lags of up to 1 s around it
  * and locks on a clear peak there (a deck that backs up on restart, a stop
- * placed a little late); without one the tracker confirms the place after
- * NEAR_TICKS. Silence or unclear music in probation sends it to the whole-
- * piece search: a jump into a quiet passage does not loop through pauses.
+ * placed a little late), or around the place the music would have
+ * reached had the tape not stopped (a fade read as a stop); without one
+ * the tracker confirms the place after NEAR_TICKS. Silence or unclear
+ * music in probation sends it to the whole-piece search: a jump into a
+ * quiet passage does not loop through pauses.
  *
  * Doubt. A collapse of the tracking peak height (short-run average 0.25
  * under the long-run one) in clear music means the tape may have jumped to
@@ -88,7 +92,8 @@
 #define VERIFY_LAGS 6           /* verification lags -6..6 [ticks] */
 #define WIDE_LAGS 12            /* tracking lags at most -12..12 [ticks] */
 #define NEAR_LAGS 50            /* near search reach -50..50 (1 s either way) [ticks] */
-#define MAX_LAGS NEAR_LAGS
+#define NEAR_RIVAL_LAGS 150     /* ... and every place within 3 s either way is its rival [ticks] */
+#define MAX_LAGS NEAR_RIVAL_LAGS
 #define LEVEL_RELEASE_DB 0.1    /* running peak level falls this much per tick [dB] */
 #define TINY 1e-10              /* loudness floor before the logarithm [full scale] */
 #define FLOOR_BLOCK 50          /* noise floor: minimum over blocks of this many frames [ticks] ... */
@@ -109,6 +114,7 @@
 #define GAIN_SLOW_ALPHA 0.02    /* ... and its slow twin's (a time constant of 1 s) [1] */
 #define TURNING_DB 2.0          /* the two this far apart: the volume knob is turning [dB] */
 #define DISTINCT 25.0           /* candidates this far apart are different places [ticks] */
+#define TRACK_SEP 4.0           /* ... but the tracker's own entry stands only for its tracking lags [ticks] */
 #define MIN_SEARCH_BLOCKS 12    /* fewest live blocks before the search scores anything */
 #define SEARCH_MIN_SCORE 0.3    /* coarse score worth a pool entry [1] */
 #define COARSE_SLACK 0.15       /* unverified entries within this of the best are verified before a lock */
@@ -134,6 +140,15 @@
 #define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */
 #define NEAR_TICKS 250          /* the near search gives up this long after the restart [ticks] */
 #define NEAR_SEP 4              /* a rival peak of the near search lies at least this far away [ticks] */
+#define PATIENT_AFTER 250       /* after this much first search, the verification window grows ... [ticks] */
+#define LONG_VERIFY 500         /* ... up to this: alike, slow music needs more audio [ticks] */
+#define STOP_TIE_DB2 1.0        /* splits whose misfit differs less than this tie [dB^2] */
+#define STOP_SPAN 256           /* splits the stop fit weighs, at most [ticks] */
+#define MAX_RATE_FIX 0.03       /* a verification corrects the rate by at most this [stored ticks per tick] */
+#define ALT_REACH 10            /* the never-stopped place is taken only this close to its line [ticks] */
+#define LONG_HOLD 50            /* a hold this long without a measurement leaves the place unproven [ticks] ... */
+#define PROOF_CONF 0.5          /* ... until the confidence is back to this [1] */
+#define SEARCH_GAP 50           /* steady hiss this long while searching: the tape stood still [ticks] */
 
 typedef struct {
     double p;                   /* position at step t [stored ticks] */
@@ -163,6 +178,9 @@ struct mar_follow {
     double *sf_buf, *sf;        /* stored feature sf[-pad .. n + pad) */
     double *sdb_buf, *sdb;      /* stored level [dB], same layout */
     double *p1, *p2;            /* prefix sums of sf and sf^2: p1[q] = sum of sf_buf[0 .. q) */
+    int onsets;                 /* 1: made with onsets; the tracker places its peak on the onset feature */
+    double *of_buf, *of;        /* stored onset feature: sf + onset_weight * onset, same layout */
+    double *o1, *o2;            /* its prefix sums */
     double s_level;             /* loud reference of the stored music [dB] */
 
     size_t D, nc;               /* coarse block [ticks], coarse blocks */
@@ -173,6 +191,7 @@ struct mar_follow {
     /* live history, a ring indexed by step */
     size_t hcap, hmask;
     double *lf;                 /* feature, NAN when missing */
+    double *lo;                 /* onset feature, NAN when missing */
     double *ldb;                /* level [dB], NAN when missing */
     double *lpos;               /* position estimate at that step [stored ticks] */
     double lvl;                 /* running peak level of the live stream [dB] */
@@ -196,9 +215,7 @@ struct mar_follow {
     double gain;                /* live minus stored level [dB] */
     double gain_slow;           /* ... followed slowly: the knob turns while the two differ [dB] */
     int have_gain;
-    uint64_t low_start;         /* first step of the current run of low frames */
-    uint64_t last_high;         /* last step whose frame was as loud as expected */
-    uint64_t low_run, silent_run;
+    uint64_t silent_run;
     uint64_t silent_start;      /* step of the first frame of the current silent run */
     double frozen;              /* position held in a pause [stored ticks] */
     uint64_t loud_run;          /* frames over the floor while paused */
@@ -215,6 +232,9 @@ struct mar_follow {
     int probation;              /* resumed from a pause: not LOCKED until the place is confirmed */
     uint64_t probation_ok;      /* accepted measurements since the resume */
     uint64_t pause_start;       /* step the pause was detected */
+    uint64_t gap_run;           /* while searching: frames of steady hiss near the floor in a row, */
+    double gap_lo, gap_hi;      /* ... their level range [dB] */
+    int unproven;               /* held long without a measurement: not LOCKED until the confidence is back */
 
     /* near search: after a restart, the place is looked for around the resumed one */
     int near;                   /* running */
@@ -223,6 +243,10 @@ struct mar_follow {
     uint64_t near_end;          /* step it gives up */
     double near_prev;           /* its last clear offset [ticks], NAN if none */
     int near_confirmed;         /* consecutive ticks it found the same offset */
+    double alt_p;               /* the place now had the tape not stopped [stored ticks], NAN if none */
+    double alt_prev;            /* its last clear offset [ticks], NAN if none */
+    int alt_confirmed;          /* consecutive ticks it found the same offset */
+    uint64_t stop_at;           /* the first step the pause holds to have been silent */
 
     /* search */
     int searching;
@@ -276,6 +300,7 @@ void mar_follow_default_options(mar_follow_options *o)
     o->quiet_db = 1.0;
     o->meas_noise = 0.5;
     o->rate_noise = 2e-4;
+    o->onset_weight = 12.0;
 }
 
 static int check_options(const mar_follow_options *o)
@@ -311,7 +336,8 @@ static int check_options(const mar_follow_options *o)
           && o->quiet_lost_after < 1e12 && o->pause_after < 1e12))
         return -EINVAL;
     if (!(o->quiet_db >= 0.0 && o->quiet_db < 100.0) || !(o->meas_noise > 0.0 && o->meas_noise < 1e6)
-        || !(o->rate_noise >= 0.0 && o->rate_noise < 1.0))
+        || !(o->rate_noise >= 0.0 && o->rate_noise < 1.0)
+        || !(o->onset_weight >= 0.0 && o->onset_weight < 100.0))
         return -EINVAL;
     return 0;
 }
@@ -352,11 +378,17 @@ static size_t usable(const mar_follow *f, uint64_t since, size_t cap)
 mar_follow *mar_follow_create(const mar_follow_options *opt, const double *stored, size_t n_stored,
                               int *status)
 {
+    return mar_follow_create_onsets(opt, stored, NULL, n_stored, status);
+}
+
+mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double *stored,
+                                     const double *onset, size_t n_stored, int *status)
+{
     *status = -EINVAL;
     if (!opt || check_options(opt) < 0 || !stored || n_stored < 2 || n_stored > ((size_t)1 << 28))
         return NULL;
     for (size_t i = 0; i < n_stored; i++)
-        if (!isfinite(stored[i]) || stored[i] < 0.0)
+        if (!isfinite(stored[i]) || stored[i] < 0.0 || (onset && !(isfinite(onset[i]) && onset[i] >= 0.0)))
             return NULL;
 
     *status = -ENOMEM;
@@ -365,7 +397,10 @@ mar_follow *mar_follow_create(const mar_follow_options *opt, const double *store
         return NULL;
     f->opt = *opt;
     f->n = n_stored;
+    f->onsets = onset != NULL;
     size_t longest = opt->window > opt->verify_window ? opt->window : opt->verify_window;
+    if (longest < LONG_VERIFY)
+        longest = LONG_VERIFY;
     if (opt->paper_window > longest)
         longest = opt->paper_window;
     size_t search_span = (size_t)((double)(opt->search_window + 2) * (double)opt->coarse / opt->rate_min) + 2;
@@ -387,6 +422,10 @@ mar_follow *mar_follow_create(const mar_follow_options *opt, const double *store
     f->sdb_buf = malloc(nf * sizeof(double));
     f->p1 = malloc((nf + 1) * sizeof(double));
     f->p2 = malloc((nf + 1) * sizeof(double));
+    f->of_buf = malloc(nf * sizeof(double));
+    f->o1 = malloc((nf + 1) * sizeof(double));
+    f->o2 = malloc((nf + 1) * sizeof(double));
+    f->lo = malloc(f->hcap * sizeof(double));
     f->sc_buf = malloc(ncb * sizeof(double));
     f->c1 = malloc((ncb + 1) * sizeof(double));
     f->c2 = malloc((ncb + 1) * sizeof(double));
@@ -398,13 +437,15 @@ mar_follow *mar_follow_create(const mar_follow_options *opt, const double *store
     f->u = malloc(f->n_rates * opt->search_window * sizeof(double));
     f->rs = malloc(f->scap * sizeof(double));
     double *sorted = malloc(n_stored * sizeof(double));
-    if (!f->sf_buf || !f->sdb_buf || !f->p1 || !f->p2 || !f->sc_buf || !f->c1 || !f->c2 || !f->lf
-        || !f->ldb || !f->lpos || !f->lc || !f->u || !f->rs || !sorted) {
+    if (!f->sf_buf || !f->sdb_buf || !f->p1 || !f->p2 || !f->of_buf || !f->o1 || !f->o2 || !f->lo
+        || !f->sc_buf || !f->c1 || !f->c2 || !f->lf || !f->ldb || !f->lpos || !f->lc || !f->u || !f->rs
+        || !sorted) {
         free(sorted);
         mar_follow_destroy(f);
         return NULL;
     }
     f->sf = f->sf_buf + f->pad;
+    f->of = f->of_buf + f->pad;
     f->sdb = f->sdb_buf + f->pad;
     f->sc = f->sc_buf + f->cpad;
 
@@ -429,10 +470,15 @@ mar_follow *mar_follow_create(const mar_follow_options *opt, const double *store
         f->sf[(long)n_stored - 1 + i] = silence;
         f->sdb[(long)n_stored - 1 + i] = level_db(0.0);
     }
-    f->p1[0] = f->p2[0] = 0.0;
+    f->p1[0] = f->p2[0] = f->o1[0] = f->o2[0] = 0.0;
     for (size_t q = 0; q < nf; q++) {
+        long i = (long)q - f->pad;
+        double rise = onset && i >= 0 && i < (long)n_stored ? onset[i] : 0.0;     /* [dB] */
+        f->of_buf[q] = f->sf_buf[q] + opt->onset_weight * rise;
         f->p1[q + 1] = f->p1[q] + f->sf_buf[q];
         f->p2[q + 1] = f->p2[q] + f->sf_buf[q] * f->sf_buf[q];
+        f->o1[q + 1] = f->o1[q] + f->of_buf[q];
+        f->o2[q + 1] = f->o2[q] + f->of_buf[q] * f->of_buf[q];
     }
     /* coarse blocks */
     for (long m = -f->cpad; m < (long)f->nc + f->cpad; m++) {
@@ -450,7 +496,7 @@ mar_follow *mar_follow_create(const mar_follow_options *opt, const double *store
         f->rates[k] = opt->rate_min + opt->rate_step * (double)k;
 
     for (size_t i = 0; i < f->hcap; i++)
-        f->lf[i] = f->ldb[i] = NAN, f->lpos[i] = 0.0;
+        f->lf[i] = f->lo[i] = f->ldb[i] = NAN, f->lpos[i] = 0.0;
     f->nf = INFINITY;
     for (int b = 0; b < FLOOR_BLOCKS; b++)
         f->floor_min[b] = INFINITY;
@@ -467,6 +513,10 @@ void mar_follow_destroy(mar_follow *f)
     free(f->sdb_buf);
     free(f->p1);
     free(f->p2);
+    free(f->of_buf);
+    free(f->o1);
+    free(f->o2);
+    free(f->lo);
     free(f->sc_buf);
     free(f->c1);
     free(f->c2);
@@ -516,12 +566,13 @@ static void kf_init(mar_follow *f, double var_p, double var_r)
 
 void mar_follow_reset(mar_follow *f, double position)
 {
-    f->low_run = f->silent_run = f->loud_run = 0;
+    f->silent_run = f->loud_run = 0;
     f->bad_since = f->quiet_since = 0;
     f->last_good = f->t;
     f->seg_start = f->t + 1;          /* older frames belong to another stretch of tape */
     f->have_gain = 0;
-    f->doubt = f->probation = f->near = f->regaining = 0;
+    f->doubt = f->probation = f->near = f->regaining = f->unproven = 0;
+    f->gap_run = 0;
     f->h_slow = f->h_fast = 0.0;
     stop_search(f);
     if (isfinite(position)) {
@@ -549,7 +600,8 @@ void mar_follow_reset(mar_follow *f, double position)
  * j0 .. j0 + m - 1, using live ages below `ages`. Missing frames take the
  * mean (they add nothing to the covariance). Returns m (0 if too few live
  * frames); *center: mean (age + 0.5) of the samples [ticks]. */
-static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0, double *center)
+static size_t resample_ch(mar_follow *f, const double *ring_buf, double p, double r, size_t ages, long *j0,
+                          double *center)
 {
     if (ages < 2 || !(r > 0.0))
         return 0;
@@ -571,10 +623,10 @@ static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0,
             a = 0.0;
         size_t i0 = (size_t)a;
         double fr = a - (double)i0;
-        double v0 = live_at(f, i0);
+        double v0 = ring_buf[ring(f, f->t - i0)];
         double v = v0;
         if (fr > 0.0 && i0 + 1 < ages) {
-            double v1 = live_at(f, i0 + 1);
+            double v1 = ring_buf[ring(f, f->t - (i0 + 1))];
             v = v0 + fr * (v1 - v0);
         }
         f->rs[k] = v;
@@ -594,11 +646,16 @@ static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0,
     return m;
 }
 
+static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0, double *center)
+{
+    return resample_ch(f, f->lf, p, r, ages, j0, center);
+}
+
 /* Pearson correlation of rs[k0 .. k0 + len) (mean removed) with the stored
  * feature at frames j0 + k0 + d + k, for d = -lags .. lags. Also returns
  * the live spread [dB]. */
-static double correlate(const mar_follow *f, const double *rs, size_t k0, size_t len, long j0, int lags,
-                        double *rho)
+static double correlate_ch(const mar_follow *f, const double *sfeat, const double *q1, const double *q2,
+                           const double *rs, size_t k0, size_t len, long j0, int lags, double *rho)
 {
     const double *l = rs + k0;
     double lm = 0.0;
@@ -610,7 +667,7 @@ static double correlate(const mar_follow *f, const double *rs, size_t k0, size_t
         ll += (l[k] - lm) * (l[k] - lm);
     for (int d = -lags; d <= lags; d++) {
         long js = j0 + (long)k0 + d;
-        const double *s = f->sf + js;
+        const double *s = sfeat + js;
         double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
         size_t k = 0;
         for (; k + 4 <= len; k += 4) {                 /* four sums: independent adds */
@@ -623,11 +680,17 @@ static double correlate(const mar_follow *f, const double *rs, size_t k0, size_t
             a0 += (l[k] - lm) * s[k];
         double cov = a0 + a1 + a2 + a3;
         size_t q = (size_t)(js + f->pad);
-        double s1 = f->p1[q + len] - f->p1[q], s2 = f->p2[q + len] - f->p2[q];
+        double s1 = q1[q + len] - q1[q], s2 = q2[q + len] - q2[q];
         double ss = s2 - s1 * s1 / (double)len;
         rho[d + lags] = (ll > 1e-9 && ss > 1e-9) ? cov / sqrt(ll * ss) : 0.0;
     }
     return sqrt(ll / (double)len);
+}
+
+static double correlate(const mar_follow *f, const double *rs, size_t k0, size_t len, long j0, int lags,
+                        double *rho)
+{
+    return correlate_ch(f, f->sf, f->p1, f->p2, rs, k0, len, j0, lags, rho);
 }
 
 /* Peak of rho[0 .. 2 lags]: returns its lag [ticks] refined by a parabola,
@@ -757,7 +820,11 @@ static double fisher(double rho)
 static double cand_rank(const cand *e) { return isnan(e->fine) ? e->coarse : e->fine + VERIFIED_BONUS; }
 
 /* A scored place: refresh the pool entry near it, or take a free place, or
- * replace the weakest entry (never the tracker's own) if better. */
+ * replace the weakest entry (never the tracker's own) if better. The
+ * tracker's own entry counts as near only within TRACK_SEP: a place a few
+ * ticks beyond the tracking lags (a small jump, 0.1-0.5 s) is the search's
+ * to verify, as the tracker cannot follow it and its entry is reset to
+ * the tracker's position every tick. */
 static void offer(mar_follow *f, double p, double r, double score)
 {
     cand *slot = NULL, *weakest = NULL;
@@ -768,7 +835,7 @@ static void offer(mar_follow *f, double p, double r, double score)
                 slot = e;
             continue;
         }
-        if (fabs(e->p - p) < DISTINCT) {
+        if (fabs(e->p - p) < (e->track ? TRACK_SEP : DISTINCT)) {
             if (e->sweep != f->sweep_id || score > e->coarse) {   /* fresh score each sweep */
                 e->sweep = f->sweep_id;
                 e->coarse = score;
@@ -871,30 +938,66 @@ static void sweep(mar_follow *f)
 /* The correlation peaks of the older (0) and the newer (1) half of the
  * newest `ages` live frames along the line (p, r), at lags up to
  * VERIFY_LAGS: lag [ticks], height [1], curvature kappa [1/tick^2], edge
- * (no peak), and ctr, the live age (+ 0.5) at the half's middle [ticks].
- * Returns 0 when there is too little audio for it. */
+ * (no peak), and ctr, the live age (+ 0.5) at the half's middle [ticks],
+ * on the level feature (onset 0) or the onset feature (onset 1). Returns 0
+ * when there is too little audio for it (or no onsets in the window). */
 typedef struct {
     double lag, height, kappa, ctr;
     int edge;
 } half_peak;
 
-static int half_peaks(mar_follow *f, double p, double r, size_t ages, half_peak hp[2])
+static int half_peaks_ch(mar_follow *f, int onset, double p, double r, size_t ages, half_peak hp[2])
 {
     long j0;
     double center;
-    size_t m = ages >= f->opt.min_window ? resample(f, p, r, ages, &j0, &center) : 0;
+    size_t m = ages >= f->opt.min_window ? resample_ch(f, onset ? f->lo : f->lf, p, r, ages, &j0, &center) : 0;
     if (m < 16)
         return 0;
     size_t h = m / 2;
     double rho[2 * MAX_LAGS + 1];
     for (int half = 0; half < 2; half++) {
         size_t k0 = half ? h : 0, len = half ? m - h : h;
-        correlate(f, f->rs, k0, len, j0, VERIFY_LAGS, rho);
+        if (onset)
+            correlate_ch(f, f->of, f->o1, f->o2, f->rs, k0, len, j0, VERIFY_LAGS, rho);
+        else
+            correlate(f, f->rs, k0, len, j0, VERIFY_LAGS, rho);
         hp[half].lag = peak(rho, VERIFY_LAGS, &hp[half].height, &hp[half].kappa, &hp[half].edge);
         double jmid = (double)j0 + (double)k0 + 0.5 * (double)(len - 1);
         hp[half].ctr = (p - 0.5 - jmid) / r;
     }
     return 1;
+}
+
+static int half_peaks(mar_follow *f, double p, double r, size_t ages, half_peak hp[2])
+{
+    return half_peaks_ch(f, 0, p, r, ages, hp);
+}
+
+/* The corrections of a line from the peaks of its two halves: rate error
+ * *er [stored ticks per tick] (the lags' drift between the halves' middles,
+ * at most MAX_RATE_FIX), position error now *ep [ticks]. */
+static void line_fix(const half_peak hp[2], double *ep, double *er)
+{
+    double r = (hp[1].lag - hp[0].lag) / (hp[0].ctr - hp[1].ctr);
+    if (r > MAX_RATE_FIX)
+        r = MAX_RATE_FIX;
+    if (r < -MAX_RATE_FIX)
+        r = -MAX_RATE_FIX;
+    *er = r;
+    *ep = hp[1].lag + r * hp[1].ctr;
+}
+
+/* The verification window now [ticks]: verify_window, growing once the
+ * first search has gone on for PATIENT_AFTER ticks, up to LONG_VERIFY.
+ * (A search after a jump or a loss keeps verify_window: its first frames
+ * may still be of the old place.) */
+static size_t verify_cap(const mar_follow *f)
+{
+    uint64_t waited = !f->ever && f->t > f->search_from ? f->t - f->search_from : 0;
+    size_t cap = f->opt.verify_window, limit = cap > LONG_VERIFY ? cap : LONG_VERIFY;
+    if (waited > PATIENT_AFTER)
+        cap += (size_t)(waited - PATIENT_AFTER);
+    return cap < limit ? cap : limit;
 }
 
 /* Full-resolution check of a pool entry: the lags of the older and the
@@ -903,7 +1006,7 @@ static int half_peaks(mar_follow *f, double p, double r, size_t ages, half_peak 
 static void verify(mar_follow *f, cand *e)
 {
     e->checked = f->t;
-    size_t ages = usable(f, e->since, f->opt.verify_window);
+    size_t ages = usable(f, e->since, verify_cap(f));
     e->frames = ages;
     half_peak hp[2];
     if (!half_peaks(f, e->p, e->r, ages, hp)) {
@@ -928,12 +1031,8 @@ static void verify(mar_follow *f, cand *e)
         e->confirmed = 0;
         return;
     }
-    double er = (newer.lag - older.lag) / (older.ctr - newer.ctr);  /* rate error [stored ticks per tick] */
-    if (er > 0.03)
-        er = 0.03;
-    if (er < -0.03)
-        er = -0.03;
-    double ep = newer.lag + er * newer.ctr;                   /* position error now [ticks] */
+    double ep, er;
+    line_fix(hp, &ep, &er);
     e->p += ep;
     e->r += er;
     if (e->r < f->opt.rate_min)
@@ -947,7 +1046,8 @@ static void verify(mar_follow *f, cand *e)
         e->confirmed = 0;
 }
 
-/* Merge entries that converged onto the same place. */
+/* Merge entries that converged onto the same place (onto the tracker's
+ * own entry: within TRACK_SEP, see offer). */
 static void dedup(mar_follow *f)
 {
     for (int i = 0; i < POOL; i++) {
@@ -955,7 +1055,7 @@ static void dedup(mar_follow *f)
             continue;
         for (int j = i + 1; j < POOL; j++) {
             cand *a = &f->pool[i], *b = &f->pool[j];
-            if (!b->used || fabs(a->p - b->p) >= 0.5 * DISTINCT)
+            if (!b->used || fabs(a->p - b->p) >= (a->track || b->track ? TRACK_SEP : 0.5 * DISTINCT))
                 continue;
             int drop_b = a->track || (!b->track && cand_rank(a) >= cand_rank(b));
             cand *loser = drop_b ? b : a, *keeper = drop_b ? a : b;
@@ -1041,7 +1141,7 @@ static cand *lock_choice(mar_follow *f)
      * window scores lower, so a rival (a twin of a repeated section) may
      * look beaten only because more audio was held against it. Before the
      * lock, each is scored again on the very frames that back this place. */
-    size_t ages = usable(f, best->since, f->opt.verify_window);
+    size_t ages = usable(f, best->since, verify_cap(f));
     double zb = fisher(score_on(f, best->p, best->r, ages));
     for (int i = 0; i < POOL; i++) {
         cand *e = &f->pool[i];
@@ -1079,18 +1179,19 @@ static void note_floor(mar_follow *f, double db)
     f->nf = nf;
 }
 
-static void take_frame(mar_follow *f, double live, uint32_t *flags, int *have)
+static void take_frame(mar_follow *f, double live, double onset, uint32_t *flags, int *have)
 {
     size_t slot = ring(f, f->t);
     *have = 0;
-    f->lf[slot] = NAN;
+    f->lf[slot] = f->lo[slot] = NAN;
     f->ldb[slot] = NAN;
     if (isnan(live)) {
         *flags |= MAR_FOLLOW_F_NO_FRAME;
         f->c.missing++;
         return;
     }
-    if (!isfinite(live) || live < 0.0) {
+    int bad_onset = f->onsets && !(isnan(onset) || (isfinite(onset) && onset >= 0.0));
+    if (!isfinite(live) || live < 0.0 || bad_onset) {
         *flags |= MAR_FOLLOW_F_BAD_INPUT | MAR_FOLLOW_F_NO_FRAME;
         f->c.bad_input++;
         return;
@@ -1098,6 +1199,9 @@ static void take_frame(mar_follow *f, double live, uint32_t *flags, int *have)
     double db = level_db(live);
     f->ldb[slot] = db;
     f->lf[slot] = feature(&f->lvl, &f->lvl_started, db, f->opt.range_db);
+    /* a frame without its onset (a source that has none) leaves a gap in the
+     * onset feature; a window without onsets tracks on the loudness alone */
+    f->lo[slot] = f->lf[slot] + (f->onsets ? f->opt.onset_weight * onset : 0.0);
     note_floor(f, db);
     f->c.frames++;
     *have = 1;
@@ -1151,12 +1255,7 @@ static int detect_pause(mar_follow *f, int have)
         return 0;                                     /* as quiet as the silence so far, and the music
                                                        * expected here would hardly stand over it
                                                        * (between drum hits): no evidence */
-    if (!low)
-        f->last_high = f->t;                          /* the music was there, as expected */
     if (low) {
-        if (f->low_run == 0)
-            f->low_start = f->t;
-        f->low_run++;
         /* silent: near the floor and steady (hiss), not a gap between notes */
         double prev = f->ldb[ring(f, f->t - 1)];
         int steady = !isnan(prev) && fabs(db - prev) <= STEADY_DB;
@@ -1178,7 +1277,6 @@ static int detect_pause(mar_follow *f, int have)
                                                        * no evidence) */
         }
     } else {
-        f->low_run = 0;
         f->silent_run = 0;
     }
     /* in a quiet passage evidence is sparse: a few silent frames where music
@@ -1269,6 +1367,17 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
     f->h_fast += H_FAST * (h - f->h_fast);
     if (edge || h < f->opt.track_threshold || !(kappa > 0.0))
         return 0;
+    if (f->onsets) {
+        /* the onset feature places the peak: rises survive a room's colouring */
+        double rho2[2 * MAX_LAGS + 1], h2, kappa2;
+        int edge2;
+        if (resample_ch(f, f->lo, f->p, f->r, ages, &j0, &c) == m) {      /* 0: no onsets in the window */
+            correlate_ch(f, f->of, f->o1, f->o2, f->rs, 0, m, j0, lags, rho2);
+            double d2 = peak(rho2, lags, &h2, &kappa2, &edge2);
+            if (!edge2 && kappa2 > 0.0)
+                d = d2, kappa = kappa2;
+        }
+    }
     double k = kappa / KAPPA_REF;
     double R = f->opt.meas_noise * f->opt.meas_noise / (k < 1.0 ? (k > 0.01 ? k : 0.01) : 1.0);
     double S = var + R;
@@ -1319,12 +1428,34 @@ static int track_paper(mar_follow *f, int *quiet, int *step, uint32_t *flags)
     return 1;
 }
 
+/* A second opinion on the line a lock takes (smooth mode, with onsets):
+ * the onset feature's two half windows measure the same position and rate
+ * corrections as the loudness's did in verify(), with errors of their own
+ * (a room moves the loudness peak of held chords, not their rises). Where
+ * both halves have a clear peak, the line moves halfway to theirs: the mean
+ * of two independent estimates. Only the line moves, not the choice of the
+ * place, which stays with the loudness (the onset feature of hiss would
+ * lock on pauses). */
+static void second_opinion(mar_follow *f, size_t ages)
+{
+    half_peak hp[2];
+    if (!half_peaks_ch(f, 1, f->p, f->r, ages, hp) || hp[0].edge || hp[1].edge
+        || hp[0].height < f->opt.track_threshold || hp[1].height < f->opt.track_threshold)
+        return;
+    double ep, er;
+    line_fix(hp, &ep, &er);
+    f->p += 0.5 * ep;
+    f->r = fmax(f->opt.rate_min, fmin(f->opt.rate_max, f->r + 0.5 * er));
+}
+
 static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
 {
     double old = f->p;
     int was_following = f->ever && f->state != MAR_FOLLOW_SEARCHING;
     f->p = e->p;
     f->r = e->r;
+    if (f->onsets && f->opt.mode == MAR_FOLLOW_SMOOTH)
+        second_opinion(f, usable(f, e->since, e->frames));
     if (f->opt.mode == MAR_FOLLOW_PAPER)
         f->p = floor(f->p + 0.5), f->r = 1.0;
     kf_init(f, 0.25, 1e-5);
@@ -1333,10 +1464,10 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->ever = 1;
     f->last_good = f->t;
     f->bad_since = f->quiet_since = 0;
-    f->low_run = f->silent_run = 0;
+    f->silent_run = 0;
     f->conf = (e->fine - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->measured = 0;
-    f->doubt = f->probation = f->regaining = 0;
+    f->doubt = f->probation = f->regaining = f->unproven = 0;
     f->h_slow = f->h_fast = e->fine;
     f->have_gain = 0;
     update_gain(f, f->p, f->r, f->opt.verify_window);
@@ -1358,47 +1489,130 @@ static void start_near(mar_follow *f, double centre, double r, uint64_t from)
     f->near_end = f->t + NEAR_TICKS;
     f->near_prev = NAN;
     f->near_confirmed = 0;
+    f->alt_p = NAN;
+    f->alt_prev = NAN;
+    f->alt_confirmed = 0;
 }
 
-/* The near search, one tick: the live frames since the restart against the
- * stored music around the resumed place, at lags -NEAR_LAGS .. NEAR_LAGS.
- * Only places within its reach compete, so a second or so of music tells
- * them apart where the whole-piece search would wait for a longer window.
- * It locks on a peak that is good, sharp, leads every other peak by the
- * lock margin and stays put (within a tick) LOCK_CONFIRM ticks in a row. */
+/* The highest local maximum of rho[0 .. 2 lags] at least NEAR_SEP from
+ * lag d [ticks]: the best rival of the peak there [1] (-1: none). */
+static double best_rival(const double *rho, int lags, double d)
+{
+    int b = (int)lround(d) + lags;
+    double rival = -1.0;
+    for (int i = 1; i < 2 * lags; i++)
+        if (abs(i - b) >= NEAR_SEP && rho[i] >= rho[i - 1] && rho[i] >= rho[i + 1] && rho[i] > rival)
+            rival = rho[i];
+    return rival;
+}
+
+/* The live frames since the restart against the stored music around
+ * `centre` [stored ticks], at lags -NEAR_LAGS .. NEAR_LAGS: the offset d
+ * [ticks] of a peak that is good, sharp and leads by the lock margin every
+ * other peak within NEAR_RIVAL_LAGS, else NAN; *h_out: the best height
+ * within reach [1] (-1: too little or too flat audio). Rivals lie beyond
+ * the reach too: music repeats by the bar (1-2.5 s), so when the tape was
+ * wound while stopped the peak within reach may be a bar off a better one
+ * outside. */
+static double near_peak(mar_follow *f, double centre, double *h_out)
+{
+    *h_out = -1.0;
+    size_t ages = usable(f, f->near_from, f->opt.verify_window);
+    long j0;
+    double c;
+    size_t m = ages >= f->opt.min_window ? resample(f, centre, f->near_r, ages, &j0, &c) : 0;
+    if (m < f->opt.min_window / 2)
+        return NAN;
+    double rho[2 * NEAR_RIVAL_LAGS + 1], h, kappa;
+    int edge;
+    if (correlate(f, f->rs, 0, m, j0, NEAR_LAGS, rho) < f->opt.quiet_db)
+        return NAN;
+    double d = peak(rho, NEAR_LAGS, &h, &kappa, &edge);
+    *h_out = h;
+    double lead = lock_lead(f, m);
+    if (edge || !lockable_peak(f, h, kappa) || fisher(h) - fisher(best_rival(rho, NEAR_LAGS, d)) < lead)
+        return NAN;
+    /* a clear peak within reach: only now the rivals beyond it (three
+     * times the lags, so three times the work) */
+    correlate(f, f->rs, 0, m, j0, NEAR_RIVAL_LAGS, rho);
+    if (fisher(h) - fisher(best_rival(rho, NEAR_RIVAL_LAGS, d)) < lead)
+        return NAN;
+    return d;
+}
+
+/* d [ticks] found again within a tick of *prev: counts the run in *run;
+ * 1 once it is LOCK_CONFIRM long. */
+static int stays_put(double d, double *prev, int *run)
+{
+    *run = !isnan(*prev) && fabs(d - *prev) <= 1.0 ? *run + 1 : 1;
+    *prev = d;
+    return *run >= LOCK_CONFIRM;
+}
+
+/* The near search, one tick: only places within its reach of the resumed
+ * one compete, so a second or so of music tells them apart where the
+ * whole-piece search would wait for a longer window. It locks on a clear
+ * peak (near_peak) that stays put (within a tick) LOCK_CONFIRM ticks in a
+ * row. Without one it also looks around the place the music would have
+ * reached had the tape not stopped: a volume turn down in a quiet passage
+ * reads as a stop, and when the music rises again it plays on from there,
+ * seconds away. That place must show its peak within ALT_REACH of its
+ * line, lead the resumed place's best height by the lock margin and stay
+ * put as well. */
 static void near_search(mar_follow *f, uint32_t *flags)
 {
     f->near_p += f->near_r;
+    f->alt_p += f->near_r;                            /* (NAN stays NAN) */
     if (f->t >= f->near_end) {
         f->near = 0;
         return;
     }
-    size_t ages = usable(f, f->near_from, f->opt.verify_window);
-    long j0;
-    double c;
-    size_t m = ages >= f->opt.min_window ? resample(f, f->near_p, f->near_r, ages, &j0, &c) : 0;
-    if (m < f->opt.min_window / 2)
-        return;
-    double rho[2 * NEAR_LAGS + 1], h, kappa;
-    int edge;
-    if (correlate(f, f->rs, 0, m, j0, NEAR_LAGS, rho) < f->opt.quiet_db)
-        return;
-    double d = peak(rho, NEAR_LAGS, &h, &kappa, &edge);
-    int b = (int)lround(d) + NEAR_LAGS;
-    double rival = -1.0;                              /* the best other peak [1] */
-    for (int i = 1; i < 2 * NEAR_LAGS; i++)
-        if (abs(i - b) >= NEAR_SEP && rho[i] >= rho[i - 1] && rho[i] >= rho[i + 1] && rho[i] > rival)
-            rival = rho[i];
-    if (edge || !lockable_peak(f, h, kappa) || fisher(h) - fisher(rival) < lock_lead(f, m)) {
-        f->near_confirmed = 0;
+    double h, d = near_peak(f, f->near_p, &h);
+    if (!isnan(d)) {
+        if (stays_put(d, &f->near_prev, &f->near_confirmed)) {
+            cand e = {.p = f->near_p + d, .r = f->near_r, .fine = h, .since = f->near_from};
+            lock_on(f, &e, flags);
+        }
         return;
     }
-    f->near_confirmed = !isnan(f->near_prev) && fabs(d - f->near_prev) <= 1.0 ? f->near_confirmed + 1 : 1;
-    f->near_prev = d;
-    if (f->near_confirmed < LOCK_CONFIRM)
+    f->near_confirmed = 0;
+    if (isnan(f->alt_p) || fabs(f->alt_p - f->near_p) < 2.0 * NEAR_LAGS)
+        return;                                       /* no other place, or within reach already */
+    double ha, da = near_peak(f, f->alt_p, &ha);
+    size_t m = usable(f, f->near_from, f->opt.verify_window);
+    if (isnan(da) || fabs(da) > ALT_REACH || fisher(ha) - fisher(h) < lock_lead(f, m > 1 ? m : 1)) {
+        f->alt_confirmed = 0;
         return;
-    cand e = {.p = f->near_p + d, .r = f->near_r, .fine = h, .since = f->near_from};
-    lock_on(f, &e, flags);
+    }
+    if (stays_put(da, &f->alt_prev, &f->alt_confirmed)) {
+        cand e = {.p = f->alt_p + da, .r = f->near_r, .fine = ha, .since = f->near_from};
+        lock_on(f, &e, flags);
+    }
+}
+
+/* While searching there is no place to expect music at, so a stop shows
+ * only as a run of steady hiss near the noise floor. During SEARCH_GAP or
+ * more such frames the search does not lock; when sound returns, it starts
+ * again on the frames from there on: those before may belong to another
+ * stretch of tape (it may have been wound), and a silence inside the
+ * window would be matched to a quiet passage of the stored music. */
+static void search_gap(mar_follow *f)
+{
+    double db = f->ldb[ring(f, f->t)];
+    if (db <= f->nf + NEAR_FLOOR_DB
+        && (f->gap_run == 0 || fmax(f->gap_hi, db) - fmin(f->gap_lo, db) <= STEADY_RANGE_DB)) {
+        if (f->gap_run == 0)
+            f->gap_lo = f->gap_hi = db;
+        f->gap_lo = fmin(f->gap_lo, db);
+        f->gap_hi = fmax(f->gap_hi, db);
+        f->gap_run++;
+        return;
+    }
+    if (f->gap_run >= SEARCH_GAP && db > f->gap_hi + MIN_RESUME_DB) {
+        stop_search(f);
+        start_search(f, f->t);
+    }
+    f->gap_run = 0;
 }
 
 static void run_search(mar_follow *f, uint32_t *flags)
@@ -1443,40 +1657,79 @@ static void run_search(mar_follow *f, uint32_t *flags)
     if (e)
         verify(f, e);
     dedup(f);
-    cand *best = lock_choice(f);
+    /* no lock during a stop: its silence would be matched to a quiet passage */
+    cand *best = f->gap_run >= SEARCH_GAP ? NULL : lock_choice(f);
     if (best)
         lock_on(f, best, flags);
 }
 
-/* The recorder stopped: back to where the silence began, and hold there.
- * It began after the last frame clearly over the noise floor, and (with a
- * reverberant tail) no later than the first frame far below the stored
- * music: the earlier of the two, plus half a frame. */
-static void pause_now(mar_follow *f)
+/* Where the tape stopped: the step of the first silent frame. It lies after
+ * the last frame clearly over the silence heard now (quiet music may stand
+ * only a few dB over the hiss) and no later than the silent run's start.
+ * Between the two, each frame should show the stored music at the position
+ * then (plus the gain, over the hiss) before the stop and the silence's
+ * level from it on: the split with the least squared misfit [dB^2] wins
+ * (each frame's misfit capped, so one odd note does not decide). Where the
+ * music was as quiet as the hiss the misfit stays flat: the middle of that
+ * flat stretch. */
+static uint64_t stop_step(const mar_follow *f, uint64_t oldest)
 {
-    uint64_t first_low = f->low_start;
-    uint64_t oldest = f->t + 1 > f->hcap - 1 ? f->t + 2 - f->hcap : 0;
-    if (oldest < f->seg_start)
-        oldest = f->seg_start;
+    double hiss = 0.5 * (f->silent_lo + f->silent_hi);          /* [dB] */
+    double loud_db = hiss + NEAR_FLOOR_DB;                        /* surely music, not hiss [dB] */
     uint64_t last_loud = f->t;
-    /* "over the floor": clearly over the silence heard now (quiet music may
-     * stand only a few dB over the hiss) */
-    double loud_db = fmin(f->nf + NEAR_FLOOR_DB, f->silent_hi + ONSET_DB);
     while (last_loud > oldest) {
         double db = f->ldb[ring(f, last_loud)];
         if (!isnan(db) && db >= loud_db)
             break;
         last_loud--;
     }
-    uint64_t stop = last_loud + 1 < first_low ? last_loud + 1 : first_low;   /* first silent step */
-    if (stop < f->last_high + 1)
-        stop = f->last_high + 1;                      /* it played as expected until then */
+    uint64_t lo_step = last_loud + 1, hi_step = f->silent_start > lo_step ? f->silent_start : lo_step;
+    if (hi_step - lo_step >= STOP_SPAN)
+        lo_step = hi_step + 1 - STOP_SPAN;
+    size_t n = (size_t)(hi_step - lo_step + 1);
+    /* splits s in [lo_step, hi_step]; frames after hi_step are silence for all of them */
+    double music_sum[STOP_SPAN + 1], silence_sum[STOP_SPAN + 1];
+    double cap = LOW_DB * LOW_DB;
+    music_sum[0] = silence_sum[0] = 0.0;
+    for (size_t i = 0; i < n; i++) {
+        uint64_t q = lo_step + i;
+        double db = f->ldb[ring(f, q)], m = 0.0, h = 0.0;
+        if (!isnan(db)) {
+            double music = stored_db_at(f, f->lpos[ring(f, q)] - 0.5 * f->r - 0.5) + f->gain;
+            double expected = 10.0 * log10(pow(10.0, 0.1 * music) + pow(10.0, 0.1 * hiss));
+            m = fmin(cap, (db - expected) * (db - expected));
+            h = fmin(cap, (db - hiss) * (db - hiss));
+        }
+        music_sum[i + 1] = music_sum[i] + m;
+        silence_sum[i + 1] = silence_sum[i] + h;
+    }
+    double best = INFINITY;
+    size_t first = 0, last = 0;                       /* the best flat stretch of splits */
+    for (size_t i = 0; i < n; i++) {
+        double cost = music_sum[i] + silence_sum[n] - silence_sum[i];
+        if (cost < best - STOP_TIE_DB2)
+            best = cost, first = last = i;
+        else if (cost <= best + STOP_TIE_DB2 && last + 1 == i)
+            last = i;
+    }
+    return lo_step + (first + last + 1) / 2;
+}
+
+/* The recorder stopped: back to where it stopped, and hold there. */
+static void pause_now(mar_follow *f)
+{
+    uint64_t oldest = f->t + 1 > f->hcap - 1 ? f->t + 2 - f->hcap : 0;
+    if (oldest < f->seg_start)
+        oldest = f->seg_start;
+    uint64_t stop = stop_step(f, oldest);             /* first silent step */
     double at = f->p;
     if (stop >= 1 && stop - 1 >= oldest && f->t - stop < f->hcap - 1)
         at = f->lpos[ring(f, stop - 1)];
     f->frozen = at - 0.5 * f->r;
+    f->stop_at = stop >= oldest && stop <= f->t ? stop : f->t;
     f->p = f->frozen;
     f->state = MAR_FOLLOW_PAUSED;
+    f->unproven = 0;
     f->loud_run = 0;
     f->pause_db = f->ldb[ring(f, f->t)];              /* a silent frame (detect_pause saw it) */
     f->pause_dev = 0.5 * (f->silent_hi - f->silent_lo);
@@ -1552,9 +1805,11 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
     f->measured = 0;
     f->last_good = f->t;
     f->bad_since = f->quiet_since = 0;
-    f->low_run = f->silent_run = 0;
+    f->silent_run = 0;
     kf_init(f, RESUME_VAR, f->P11 + 1e-6);
     start_near(f, f->p, f->r, onset);
+    if (f->r > 0.0)               /* had the tape not stopped (a fade read as a stop) */
+        f->alt_p = f->frozen + f->r * (double)(f->t + 1 - f->stop_at);
     f->c.resumes++;
     *flags |= MAR_FOLLOW_F_JUMP;
     return 1;
@@ -1617,6 +1872,14 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
     if (quiet == 1)
         *flags |= MAR_FOLLOW_F_QUIET;
     double since = (double)(f->t - f->last_good);
+    /* a second without a fitting measurement: the place is the flywheel's
+     * guess (a stop under the hiss goes unnoticed, and bars alike fit a
+     * place bars off); not LOCKED again on a weak fit, only once the
+     * confidence is back (or by a lock) */
+    if (since > LONG_HOLD)
+        f->unproven = 1;
+    else if (f->conf >= PROOF_CONF)
+        f->unproven = 0;
     /* the tracking correlation collapsed while the music is clear: the tape
      * may have jumped to a place that resembles this one (the same drums):
      * doubt the place, and let the search (with this place in its pool)
@@ -1636,7 +1899,7 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         f->probation = 0;
     /* LOCKED: a measurement confirmed the place since the last (re)start, recently */
     f->state = since <= f->opt.hold_after && f->measured && !f->doubt && !f->probation && !f->regaining
-        ? MAR_FOLLOW_LOCKED : MAR_FOLLOW_HOLDING;
+        && !f->unproven ? MAR_FOLLOW_LOCKED : MAR_FOLLOW_HOLDING;
     /* frames from well before the measurements went bad may belong to
      * another place of the tape (a jump): the search starts after them */
     uint64_t bad_start = f->t + 1 - f->bad_since;
@@ -1662,10 +1925,15 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
 
 void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
 {
+    mar_follow_step_onset(f, live, NAN, out);
+}
+
+void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_out *out)
+{
     uint32_t flags = 0;
     int have;
     f->c.steps++;
-    take_frame(f, live, &flags, &have);
+    take_frame(f, live, onset, &flags, &have);
 
     /* 1. the clock: where the music is now, before this frame is looked at */
     int resumed = 0;
@@ -1686,7 +1954,7 @@ void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
                  * place is doubtful; search from here (no position guess) */
                 f->probation = f->doubt = f->near = 0;
                 f->state = MAR_FOLLOW_SEARCHING;
-                f->low_run = f->silent_run = 0;
+                f->silent_run = 0;
                 stop_search(f);
                 start_search(f, f->t + 1);
             } else {
@@ -1700,6 +1968,10 @@ void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
     /* 3. the searches, when not locked or in doubt */
     if (f->near && f->state != MAR_FOLLOW_PAUSED && !resumed)
         near_search(f, &flags);
+    if (f->state == MAR_FOLLOW_SEARCHING && have)
+        search_gap(f);
+    else
+        f->gap_run = 0;
     if (f->searching)
         run_search(f, &flags);
     if (f->state == MAR_FOLLOW_SEARCHING) {

@@ -84,6 +84,7 @@ typedef struct {
     double quiet_db;            /* live window spread below this is quiet [dB] */
     double meas_noise;          /* tracking measurement noise, 1 sigma [stored ticks] */
     double rate_noise;          /* rate random walk per tick, 1 sigma [stored ticks per tick] */
+    double onset_weight;        /* with onsets: onset feature = feature + this times onset strength [dB/dB] */
 } mar_follow_options;
 
 typedef struct {
@@ -118,6 +119,12 @@ void mar_follow_default_options(mar_follow_options *opt);
  * whole piece as candidates. Returns NULL on failure and sets *status. */
 mar_follow *mar_follow_create(const mar_follow_options *opt, const double *stored, size_t n_stored,
                               int *status);
+/* The same, with each stored frame's onset strength (n_stored values,
+ * finite and >= 0 [dB]; NULL: none, as mar_follow_create): the tracker then
+ * places its peak on the onset feature, the loudness feature plus
+ * opt.onset_weight times the onset (live onsets through mar_follow_step_onset). */
+mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double *stored,
+                                     const double *onset, size_t n_stored, int *status);
 void mar_follow_destroy(mar_follow *f);
 
 /* One tick. live: the newest live loudness frame (linear, >= 0), or NaN
@@ -130,6 +137,13 @@ void mar_follow_step(mar_follow *f, double live, mar_follow_out *out);
  * The follower plays on from there at rate 1 (state HOLDING) and confirms
  * by correlation; if it cannot, it searches. NaN: unknown, search the whole
  * piece (as after create). The live history is kept. */
+/* One tick with the live frame's loudness and its onset strength [dB]. A
+ * follower made with onsets places the tracking peak on the onset feature
+ * where the window has onsets; NaN onset: this frame has none (a source
+ * that measures loudness only), the loudness still counts. A follower made
+ * without ignores the onset. */
+void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_out *out);
+
 void mar_follow_reset(mar_follow *f, double position);
 
 void mar_follow_get_counters(const mar_follow *f, mar_follow_counters *c);

@@ -104,12 +104,13 @@ cdef extern from "mar_engine.h" nogil:
         pass
     mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axes, size_t n_axes,
                                   const double *show, size_t n_ticks, const double *loudness,
-                                  int *status)
+                                  const double *onsets, int *status)
     void mar_engine_destroy(mar_engine *e)
     int mar_engine_step(mar_engine *e, uint64_t n)
     int mar_engine_set_rate(mar_engine *e, double rate)
     int mar_engine_seek(mar_engine *e, double position)
     int mar_engine_push_loudness(mar_engine *e, double value)
+    int mar_engine_push_frame(mar_engine *e, double value, double onset)
     void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask)
     int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized)
     int mar_engine_snapshot(const mar_engine *e, mar_record *rec, double *commands)

@@ -9,6 +9,7 @@ import numpy as np
 cimport numpy as cnp
 from libc.stdint cimport int32_t, int64_t, uint8_t, uint32_t, uint64_t
 from libc.stdlib cimport calloc, free
+from libc.math cimport NAN
 from libc.string cimport memcpy
 
 from marionette._cengine cimport *
@@ -70,13 +71,19 @@ cdef class CoreEngine:
                   cnp.ndarray[cnp.float64_t, ndim=2, mode="c"] show,
                   cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] loudness,
                   size_t record_slots, size_t loudness_slots, bint start_holding=False,
-                  bytes follow_options=None):
+                  bytes follow_options=None, onsets=None):
         """follow_options: a filled mar_follow_options (marionette._follow.options_bytes),
-        or None to let the rate drive the playback clock."""
+        or None to let the rate drive the playback clock; onsets: the stored
+        onset strength (ticks,) [dB] for the follower, or None."""
         axes = np.ascontiguousarray(axes, dtype=AXIS_DTYPE)
         cdef size_t n_axes = axes.shape[0]
         if show.shape[0] != n_axes or loudness.shape[0] != show.shape[1]:
             raise ValueError("show must be (axes, ticks) and loudness (ticks,)")
+        cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] c_onsets = None
+        if onsets is not None:
+            c_onsets = np.ascontiguousarray(onsets, dtype=np.float64)
+            if c_onsets.shape[0] != show.shape[1]:
+                raise ValueError("onsets must be (ticks,)")
         cdef mar_axis *c_axes = <mar_axis *>calloc(max(n_axes, 1), sizeof(mar_axis))
         if c_axes == NULL:
             raise MemoryError()
@@ -109,7 +116,8 @@ cdef class CoreEngine:
             memcpy(&opt.follow_opt, <const char *>follow_options, sizeof(mar_follow_options))
         cdef int status = 0
         self.engine = mar_engine_create(&opt, c_axes, n_axes, &show[0, 0], show.shape[1],
-                                        &loudness[0], &status)
+                                        &loudness[0], NULL if c_onsets is None else &c_onsets[0],
+                                        &status)
         free(c_axes)
         if self.engine == NULL:
             raise ValueError(f"the C engine refused its configuration (status {status})")
@@ -166,8 +174,8 @@ cdef class CoreEngine:
     def seek(self, double position):
         return mar_engine_seek(self.engine, position)
 
-    def push_loudness(self, double value):
-        return mar_engine_push_loudness(self.engine, value)
+    def push_loudness(self, double value, double onset=NAN):
+        return mar_engine_push_frame(self.engine, value, onset)
 
     def set_node_alarms(self, uint32_t mask):
         mar_engine_set_node_alarms(self.engine, mask)

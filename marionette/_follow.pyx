@@ -57,6 +57,7 @@ cdef extern from "mar_follow.h" nogil:
         double quiet_db
         double meas_noise
         double rate_noise
+        double onset_weight
     ctypedef struct mar_follow_out:
         double position
         double rate
@@ -79,6 +80,9 @@ cdef extern from "mar_follow.h" nogil:
     void mar_follow_default_options(mar_follow_options *opt)
     mar_follow *mar_follow_create(const mar_follow_options *opt, const double *stored, size_t n_stored,
                                   int *status)
+    mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double *stored,
+                                         const double *onset, size_t n_stored, int *status)
+    void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_out *out)
     void mar_follow_destroy(mar_follow *f)
     void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
     void mar_follow_reset(mar_follow *f, double position)
@@ -99,7 +103,8 @@ OPTION_KINDS = {"mode": "mode", "rate_min": "f", "rate_max": "f", "delay": "f", 
                 "coarse": "i", "search_window": "i", "rate_step": "f", "search_budget": "i",
                 "track_threshold": "f", "lock_threshold": "f", "lock_margin": "f",
                 "hold_after": "f", "search_after": "f", "lost_after": "f", "quiet_lost_after": "f",
-                "pause_after": "f", "quiet_db": "f", "meas_noise": "f", "rate_noise": "f"}
+                "pause_after": "f", "quiet_db": "f", "meas_noise": "f", "rate_noise": "f",
+                "onset_weight": "f"}
 
 
 cdef dict _options_dict(mar_follow_options *o):
@@ -112,7 +117,8 @@ cdef dict _options_dict(mar_follow_options *o):
             "lock_threshold": o.lock_threshold, "lock_margin": o.lock_margin,
             "hold_after": o.hold_after, "search_after": o.search_after, "lost_after": o.lost_after,
             "quiet_lost_after": o.quiet_lost_after, "pause_after": o.pause_after,
-            "quiet_db": o.quiet_db, "meas_noise": o.meas_noise, "rate_noise": o.rate_noise}
+            "quiet_db": o.quiet_db, "meas_noise": o.meas_noise, "rate_noise": o.rate_noise,
+            "onset_weight": o.onset_weight}
 
 
 def default_options():
@@ -160,21 +166,24 @@ cdef int _set_options(mar_follow_options *o, dict options) except -1:
             elif key == "quiet_db": o.quiet_db = x
             elif key == "meas_noise": o.meas_noise = x
             elif key == "rate_noise": o.rate_noise = x
+            elif key == "onset_weight": o.onset_weight = x
     return 0
 
 
 cdef class Follower:
     """The C follower over a stored loudness array (linear, one value per tick).
 
-    ``Follower(stored, options)``: options is a dict of mar_follow_options
-    fields (see default_options); raises KeyError for an unknown name and
-    ValueError(status) when C refuses the options or the stored loudness.
+    ``Follower(stored, options, onset=None)``: options is a dict of
+    mar_follow_options fields (see default_options); onset the stored onset
+    strength [dB] (mar_follow_create_onsets) or None; raises KeyError for an
+    unknown name and ValueError(status) when C refuses the options or the
+    stored values.
     """
 
     cdef mar_follow *f
     cdef readonly dict options
 
-    def __cinit__(self, stored, dict options=None):
+    def __cinit__(self, stored, dict options=None, onset=None):
         cdef mar_follow_options o
         cdef int status = 0
         mar_follow_default_options(&o)
@@ -184,8 +193,16 @@ cdef class Follower:
         cdef size_t n = s.shape[0]
         if n == 0:
             raise ValueError(-22)
-        with nogil:
-            self.f = mar_follow_create(&o, &s[0], n, &status)
+        cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] on
+        if onset is not None:
+            on = np.ascontiguousarray(onset, dtype=np.float64)
+            if on.shape[0] != n:
+                raise ValueError(-22)
+            with nogil:
+                self.f = mar_follow_create_onsets(&o, &s[0], &on[0], n, &status)
+        else:
+            with nogil:
+                self.f = mar_follow_create(&o, &s[0], n, &status)
         if self.f == NULL:
             raise ValueError(status)
 
@@ -194,20 +211,24 @@ cdef class Follower:
             mar_follow_destroy(self.f)
             self.f = NULL
 
-    def step(self, double live):
+    def step(self, double live, double onset=NAN):
         """One tick: (position [stored ticks], rate [stored ticks per tick],
         confidence [0..1], state code, flags)."""
         cdef mar_follow_out out
-        mar_follow_step(self.f, live, &out)
+        mar_follow_step_onset(self.f, live, onset, &out)
         return out.position, out.rate, out.confidence, out.state, out.flags
 
-    def run(self, live, bint timing=False):
+    def run(self, live, onset=None, bint timing=False):
         """Every frame of ``live`` (NaN: no frame that tick) through the C step,
         without the GIL. Returns a dict of arrays: position, rate,
         confidence, state (int8), flags (uint32), and with timing also ns
         (int64: wall time of each step [ns], CLOCK_MONOTONIC around it)."""
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] x = np.ascontiguousarray(live, dtype=np.float64)
         cdef Py_ssize_t n = x.shape[0], i
+        cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] ov = (
+            np.full(n, np.nan) if onset is None else np.ascontiguousarray(onset, dtype=np.float64))
+        if ov.shape[0] != n:
+            raise ValueError(-22)
         position = np.empty(n)
         rate = np.empty(n)
         confidence = np.empty(n)
@@ -224,7 +245,7 @@ cdef class Follower:
             for i in range(n):
                 if timing:
                     clock_gettime(CLOCK_MONOTONIC, &t0)
-                mar_follow_step(self.f, x[i], &out)
+                mar_follow_step_onset(self.f, x[i], ov[i], &out)
                 if timing:
                     clock_gettime(CLOCK_MONOTONIC, &t1)
                     tv[i] = (t1.tv_sec - t0.tv_sec) * 1000000000 + (t1.tv_nsec - t0.tv_nsec)

@@ -43,21 +43,21 @@ def cmd_check(args) -> int:
 
 
 def _live_frames(args, config):
-    """The live music's loudness frames from --music (a recording played
-    back as if live), or None."""
+    """The live music's (loudness, onset strength) frames from --music (a
+    recording played back as if live), or None."""
     if not args.music:
         return None
-    from marionette.loudness import wav_loudness
-    return wav_loudness(args.music, config.tick_period)
+    from marionette.loudness import wav_frames
+    return list(zip(*wav_frames(args.music, config.tick_period)))
 
 
 def _feed_in_real_time(engine, frames, period: float, stop: threading.Event) -> None:
     """Push one frame per period [s], as a sound card would."""
     start = time.monotonic()
-    for k, value in enumerate(frames):
+    for k, (value, onset) in enumerate(frames):
         if stop.wait(max(0.0, start + (k + 1) * period - time.monotonic())):
             return
-        engine.push_loudness(float(value))
+        engine.push_loudness(float(value), float(onset))
 
 
 def cmd_play(args) -> int:
@@ -80,7 +80,8 @@ def cmd_play(args) -> int:
                     follow=follow) as engine:
             if args.audio_device is not None:
                 from marionette.live_audio import LiveLoudness
-                audio = LiveLoudness(engine.push_loudness, device=args.audio_device or None).start()
+                audio = LiveLoudness(engine.push_loudness, device=args.audio_device or None,
+                                     onsets=True).start()
             if args.realtime:
                 engine.start(priority=args.priority, cpu=args.cpu, lock_memory=args.lock_memory,
                              max_ticks=n)
@@ -92,7 +93,7 @@ def cmd_play(args) -> int:
             elif live is not None:
                 for k in range(n):
                     if k < len(live):
-                        engine.push_loudness(float(live[k]))
+                        engine.push_loudness(*live[k])
                     engine.step(1)
             else:
                 engine.step(n)

@@ -2,9 +2,13 @@
 
     marionette sync-sim --taught TAUGHT.wav --live LIVE.wav --out TRACK.csv
                         [--mode smooth|paper] [--truth TRUTH.csv] [--config FIGURE.toml]
+                        [--loudness-only]
 
-The taught recording gives the stored loudness (one frame per tick), the
-live recording the live frames; the C follower (the same code the engine
+The taught recording gives the stored loudness and onset strength (one
+frame each per tick, marionette/loudness.py), the live recording the live
+frames (--loudness-only: the live loudness alone, as servo nodes measure
+it; the tracker then works without onsets, as the engine does on node
+LOUDNESS frames); the C follower (the same code the engine
 runs) steps once per tick: tick k has heard the live audio up to k * T, so
 it gets live frame k - 1 (tick 0 gets none). TRACK.csv has one row per tick:
 
@@ -27,7 +31,7 @@ import numpy as np
 from marionette.config import FOLLOW_MODES, load_config
 from marionette.errors import MarionetteError
 from marionette.follow import STATES, Follower, sync_ticks
-from marionette.loudness import wav_loudness
+from marionette.loudness import wav_frames, wav_loudness
 
 
 class SyncSimError(MarionetteError, ValueError):
@@ -80,16 +84,21 @@ def accuracy(errors_s: np.ndarray) -> dict:
             "median_ms": float(np.median(e) * 1e3), "p95_ms": float(np.quantile(e, 0.95) * 1e3)}
 
 
-def simulate(taught, live, mode: str = "smooth", config=None):
-    """Runs the follower over two recordings; returns (track, period [s], follower)."""
+def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool = True):
+    """Runs the follower over two recordings; returns (track, period [s], follower).
+    live_onsets False: the live frames carry no onset (a node's LOUDNESS)."""
     period = config.tick_period if config is not None else 0.020
     settings = config.follow if config is not None else None
-    stored = wav_loudness(taught, period)
-    frames = wav_loudness(live, period)
+    stored, stored_onsets = wav_frames(taught, period)
+    if live_onsets:
+        frames, onsets = wav_frames(live, period)
+    else:                       # as a node measures it: no onset is computed
+        frames = wav_loudness(live, period)
+        onsets = np.full(len(frames), np.nan)
     if len(stored) < 2:
         raise SyncSimError(f"{taught}: shorter than two ticks ({len(stored)} frames)")
-    follower = Follower(stored, settings, period, mode=mode)
-    track = follower.run(sync_ticks(frames))
+    follower = Follower(stored, settings, period, onset=stored_onsets, mode=mode)
+    track = follower.run(sync_ticks(frames), sync_ticks(onsets))
     return track, period, follower
 
 
@@ -109,7 +118,8 @@ def write_track(path, track, period: float) -> None:
 
 def run(args) -> int:
     config = load_config(args.config) if args.config else None
-    track, period, follower = simulate(args.taught, args.live, args.mode, config)
+    track, period, follower = simulate(args.taught, args.live, args.mode, config,
+                                       live_onsets=not args.loudness_only)
     write_track(args.out, track, period)
     n = len(track.position)
     locked = np.flatnonzero(track.state == STATES.index("locked"))
@@ -147,4 +157,6 @@ def register(sub) -> None:
                    help="smooth (fractional rate, default) or paper (double or skip a sample)")
     p.add_argument("--truth", help="CSV tick,position_s: print the accuracy against it")
     p.add_argument("--config", help="figure TOML for the tick period and [follow] settings")
+    p.add_argument("--loudness-only", action="store_true",
+                   help="live frames without onsets, as servo nodes send them (LOUDNESS)")
     p.set_defaults(run=run)

@@ -19,7 +19,7 @@ import numpy as np
 
 from marionette.config import load_config
 from marionette.errors import TeachError
-from marionette.loudness import wav_loudness
+from marionette.loudness import wav_frames
 from marionette.progress import Progress
 from marionette.shape import POLICIES, shape_show
 from marionette.show import LIMIT_POLICIES, Show, fit_to_figure
@@ -148,10 +148,11 @@ def _teach(args, progress: Progress) -> int:
     stage_values["shaped"] = show.positions
 
     progress.step("music")
-    loud = wav_loudness(args.music, period=config.tick_period)
+    loud, onset = wav_frames(args.music, period=config.tick_period)
     n = show.n_ticks
     music_frames = loud.size
     show.loudness = np.concatenate([loud[:n], np.zeros(max(0, n - loud.size))])
+    show.onsets = np.concatenate([onset[:n], np.zeros(max(0, n - onset.size))])
 
     progress.step("writing")
     extra = {"stage_names": np.array([k for k, _, _ in STAGES]),
@@ -218,7 +219,7 @@ def _report(args, config, settings, stages, show, report, untaught, music_frames
     fit = (f"cut to {n}" if music_frames > n else
            f"padded with {n - music_frames} silent frames" if music_frames < n else "as long as the show")
     print(f"  loudness: {music_frames} frames of {T * 1e3:g} ms from {args.music} "
-          f"({music_frames * T:.2f} s), {fit}")
+          f"({music_frames * T:.2f} s), {fit}; its onset strength beside it")
     print(f"  duration: {show.duration:.2f} s ({n} ticks of {T * 1e3:g} ms)")
     print(f"wrote {args.output} (show + filter stages for `marionette plot`)")
 

@@ -116,7 +116,8 @@ class Engine:
             axis_table(config, start), positions,
             np.ascontiguousarray(self.show.loudness, dtype=np.float64),
             RECORD_SLOTS if record else 0, LOUDNESS_SLOTS, start_pose is not None,
-            None if follow is None else follower_options(config, self.show, follow))
+            None if follow is None else follower_options(config, self.show, follow),
+            self.show.onsets if follow is not None else None)
         self._request_lock = threading.Lock()
         self.recorder = None
         if record:
@@ -325,11 +326,15 @@ class Engine:
         if self.supervisor is not None:
             self.supervisor.release()
 
-    def push_loudness(self, value: float) -> None:
-        """Hand the tick a live loudness frame (>= 0, finite); refused frames raise."""
-        status = self._core.push_loudness(float(value))
+    def push_loudness(self, value: float, onset: float = float("nan")) -> None:
+        """Hand the tick a live loudness frame (>= 0, finite) and its onset
+        strength [dB] (>= 0; NaN: the source has none, as a node's LOUDNESS);
+        refused frames raise. A show with stored onsets lets the follower
+        place its tracking peak on them."""
+        status = self._core.push_loudness(float(value), float(onset))
         if status == -errno.EINVAL:
-            raise ValueError(f"live loudness {value!r} refused: it must be finite and >= 0")
+            raise ValueError(f"live frame {value!r} (onset {onset!r}) refused: the loudness must be "
+                             "finite and >= 0, the onset NaN or finite and >= 0")
         _raise_for(status, "push_loudness")
 
     def _pose(self, pose, fill) -> np.ndarray:

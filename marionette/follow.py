@@ -80,13 +80,18 @@ def default_options() -> dict:
 class Follower:
     """The C follower over stored (linear loudness, one value per tick, >= 0).
 
+    onset: the stored onset strength (marionette.loudness.onsets, [dB], one
+    per tick, >= 0) or None. With it the tracker places its correlation
+    peak on the loudness plus onset_weight times the onset, which a room's
+    colouring does not shift, wherever the live frames bring onsets too
+    (NaN: a frame without; the loudness alone where a window has none).
     settings: a FollowConfig (the figure's [follow] table) or None for the
     defaults; period: tick period [s]; options: C options by name, which
     override the settings (see default_options()).
     """
 
     def __init__(self, stored, settings: FollowConfig | None = None, period: float = 0.020,
-                 **options):
+                 onset=None, **options):
         stored = np.asarray(stored, dtype=np.float64)
         if stored.ndim != 1 or len(stored) < 2:
             raise FollowError(f"stored loudness must be a 1-d array of at least 2 values, "
@@ -94,9 +99,16 @@ class Follower:
         bad = np.flatnonzero(~(np.isfinite(stored) & (stored >= 0)))
         if len(bad):
             raise FollowError(f"stored loudness[{bad[0]}] = {float(stored[bad[0]])!r} must be finite and >= 0")
+        if onset is not None:
+            onset = np.asarray(onset, dtype=np.float64)
+            if onset.shape != stored.shape:
+                raise FollowError(f"stored onsets: shape {onset.shape}, the loudness has {stored.shape}")
+            bad = np.flatnonzero(~(np.isfinite(onset) & (onset >= 0)))
+            if len(bad):
+                raise FollowError(f"stored onset[{bad[0]}] = {float(onset[bad[0]])!r} must be finite and >= 0")
         opt = c_options(settings, period, **options)
         try:
-            self._f = _follow.Follower(stored, opt)
+            self._f = _follow.Follower(stored, opt, onset)
         except KeyError as exc:
             raise FollowError(f"unknown follower option {exc.args[0]!r} "
                               f"(known: {', '.join(sorted(_follow.OPTION_KINDS))})") from None
@@ -111,17 +123,21 @@ class Follower:
         """Stored frames [ticks]."""
         return self._f.stored_length
 
-    def step(self, live: float = float("nan")) -> FollowOut:
-        """One tick with the newest live frame (linear loudness; NaN: none came)."""
-        p, r, c, s, fl = self._f.step(float(live))
+    def step(self, live: float = float("nan"), onset: float = float("nan")) -> FollowOut:
+        """One tick with the newest live frame (linear loudness, and its onset
+        strength [dB] when made with onsets; NaN: none came)."""
+        p, r, c, s, fl = self._f.step(float(live), float(onset))
         return FollowOut(position=p, rate=r, confidence=c, state=STATES[s], flags=fl)
 
-    def run(self, live, timing: bool = False) -> Track:
-        """One tick per live frame (NaN: no frame that tick), in C without the GIL."""
+    def run(self, live, onset=None, timing: bool = False) -> Track:
+        """One tick per live frame (NaN: no frame that tick), in C without the
+        GIL; onset: the live onset strengths [dB], one per frame, when made with onsets."""
         live = np.asarray(live, dtype=np.float64)
         if live.ndim != 1:
             raise FollowError(f"live frames must be a 1-d array, got shape {live.shape}")
-        out = self._f.run(live, timing)
+        if onset is not None and np.shape(onset) != live.shape:
+            raise FollowError(f"live onsets: shape {np.shape(onset)}, the live frames have {live.shape}")
+        out = self._f.run(live, onset, timing)
         return Track(position=out["position"], rate=out["rate"], confidence=out["confidence"],
                      state=out["state"], flags=out["flags"], ns=out.get("ns"))
 

@@ -25,7 +25,7 @@ from typing import Callable
 
 import numpy as np
 
-from marionette.loudness import FRAME_PERIOD, AudioError, LoudnessMeter
+from marionette.loudness import FRAME_PERIOD, AudioError, LoudnessMeter, OnsetMeter
 
 BLOCK_PERIOD = 0.010            # capture block [s]: half a frame, so frames leave on time
 
@@ -79,14 +79,16 @@ class LiveLoudness:
     """A sound card as a source of loudness frames.
 
     callback(value) gets each frame (linear loudness >= 0, one per period
-    [s] of audio). device: index or part of the name (None: the first
-    input); sample_rate [Hz] (None: the device's default); channels to
-    record (averaged to mono). sd: the sounddevice module to use (tests).
+    [s] of audio); with onsets=True callback(value, onset), the frame's
+    onset strength [dB] beside it (``Engine.push_loudness`` takes both).
+    device: index or part of the name (None: the first input); sample_rate
+    [Hz] (None: the device's default); channels to record (averaged to
+    mono). sd: the sounddevice module to use (tests).
     """
 
-    def __init__(self, callback: Callable[[float], object], device=None,
+    def __init__(self, callback: Callable[..., object], device=None,
                  sample_rate: float | None = None, channels: int = 1,
-                 period: float = FRAME_PERIOD, sd=None):
+                 period: float = FRAME_PERIOD, sd=None, onsets: bool = False):
         self.sd = sd or import_sounddevice()
         self.callback = callback
         self.device = _choose(input_devices(self.sd), device)
@@ -102,6 +104,7 @@ class LiveLoudness:
             raise AudioError(f"audio input {self.device['name']!r} cannot record {self.channels} "
                              f"channel(s) at {self.sample_rate:g} Hz: {exc}") from None
         self.meter = LoudnessMeter(self.sample_rate, period)       # AudioError below 8 kHz
+        self.onset_meter = OnsetMeter(self.sample_rate, period) if onsets else None
         self.frames = 0                 # frames delivered
         self.overflows = 0              # blocks PortAudio reported as overflowed or dropped
         self._lock = threading.Lock()
@@ -111,10 +114,15 @@ class LiveLoudness:
         """PortAudio's callback: one block of audio, shape (frames, channels)."""
         if status:
             self.overflows += 1
+        block = np.asarray(indata, dtype=np.float64).reshape(frames, -1)
         with self._lock:
-            values = self.meter.feed(np.asarray(indata, dtype=np.float64).reshape(frames, -1))
-        for v in values:
-            self.callback(float(v))
+            values = self.meter.feed(block)
+            onsets = None if self.onset_meter is None else self.onset_meter.feed(block)
+        for i, v in enumerate(values):
+            if onsets is None:
+                self.callback(float(v))
+            else:
+                self.callback(float(v), float(onsets[i]))
             self.frames += 1
 
     def start(self) -> "LiveLoudness":

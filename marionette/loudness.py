@@ -1,5 +1,6 @@
 """The music's loudness, one value per 20 ms tick: the feature the engine
-correlates at the show against the one stored at teach time.
+correlates at the show against the one stored at teach time; and beside it
+the onset strength (OnsetMeter), which places the tracker's peak.
 
 The same code computes it at both times, so the two agree by construction:
 
@@ -68,6 +69,10 @@ class LoudnessMeter:
         keep = int(np.floor(k * self.sample_rate * self.period)) - self._consumed
         self._pending = self._pending[keep:]
         self._consumed += keep
+        return self.measure(frames)
+
+    def measure(self, frames) -> np.ndarray:
+        """The value of each frame (rows of frame_len samples, in order): here its loudness."""
         return self.frame_loudness(frames)
 
     def frame_loudness(self, frames) -> np.ndarray:
@@ -76,6 +81,73 @@ class LoudnessMeter:
         # Parseval: mean square of the band = 2 * sum |X|^2 / N^2 (one-sided spectrum)
         power = 2.0 * np.sum(np.abs(spectrum[:, self._band]) ** 2, axis=1) / self.frame_len ** 2
         return np.sqrt(power * 2.0)      # full-scale sine (mean square 1/2) -> 1.0
+
+
+ONSET_EDGES = np.geomspace(60.0, 4000.0, 17)   # [Hz] edges of the 16 onset bands
+ONSET_RANGE_DB = 50.0       # band powers this far under the frame's running peak read as that [dB]
+ONSET_RELEASE_DB = 0.1      # ... the running peak falls this much per frame [dB]
+ONSET_SMOOTH = 0.2          # band power smoothing for the noise estimate, per frame [1]
+ONSET_RISE_DB = 0.05        # the band noise estimate rises at most this much per frame [dB]
+ONSET_OVER_NOISE = 10.0     # band powers read as at least this times the band's noise estimate [1]
+ONSET_SILENCE = 1e-14       # ... and never under this (digital silence) [full scale^2 per band]
+ONSET_MAX_RISE_DB = 30.0    # a band's rise counts up to this much [dB]
+
+
+class OnsetMeter(LoudnessMeter):
+    """Turns a stream of audio blocks into onset strength frames [dB]: how
+    much the music's band levels rose since the frame before.
+
+    The same framing as LoudnessMeter (feed() returns one value per 20 ms
+    frame); per frame, the power in 16 bands between 60 Hz and 4 kHz (Hann
+    window), each read in dB over a floor, and the mean over the bands of
+    the rise since the last frame (falls count 0, a rise at most 30 dB).
+    A room colours each note by its own gain, which the loudness carries
+    for as long as the note sounds; a rise in dB does not carry it. The
+    floor is the highest of 50 dB under the running peak, a floor for
+    digital silence and ten times the band's noise estimate (a minimum of
+    the smoothed band power that rises 2.5 dB/s at most), so tape hiss in a
+    quiet band does not read as onsets, nor a note after digital silence as
+    a rise without bound. A volume knob scales every band alike and leaves
+    the rises as they are.
+    """
+
+    def __init__(self, sample_rate: float, period: float = FRAME_PERIOD):
+        super().__init__(sample_rate, period)
+        freqs = np.fft.rfftfreq(self.frame_len, 1.0 / self.sample_rate)
+        band = np.searchsorted(ONSET_EDGES, freqs, side="right") - 1           # band of each bin
+        inside = (freqs >= ONSET_EDGES[0]) & (freqs < ONSET_EDGES[-1])
+        self._bins = [np.flatnonzero(inside & (band == b)) for b in range(len(ONSET_EDGES) - 1)]
+        self._window = np.hanning(self.frame_len)
+        self._peak = None           # running peak of the frame's band power [dB]
+        self._smooth = None         # smoothed band powers [full scale^2]
+        self._noise = None          # band noise estimates [full scale^2]
+        self._prev = None           # band levels of the last frame [dB]
+
+    def measure(self, frames) -> np.ndarray:
+        """Onset strength of consecutive frames (rows of frame_len samples) [dB]."""
+        spectrum = np.abs(np.fft.rfft(np.atleast_2d(frames) * self._window, axis=1) / self.frame_len) ** 2
+        bands = np.stack([spectrum[:, idx].sum(axis=1) for idx in self._bins], axis=1)
+        total_db = 10.0 * np.log10(bands.sum(axis=1) + 1e-20)
+        rise = 10.0 ** (ONSET_RISE_DB / 10.0)
+        out = np.zeros(len(bands))
+        for i, power in enumerate(bands):
+            if self._peak is None:
+                self._peak, self._smooth, self._noise = total_db[i], power.copy(), power.copy()
+            self._peak = max(total_db[i], self._peak - ONSET_RELEASE_DB)
+            self._smooth += ONSET_SMOOTH * (power - self._smooth)
+            self._noise = np.minimum(self._smooth, self._noise * rise)
+            floor = np.maximum(max(10.0 ** ((self._peak - ONSET_RANGE_DB) / 10.0), ONSET_SILENCE),
+                               ONSET_OVER_NOISE * self._noise)
+            level = 10.0 * np.log10(power + floor)
+            if self._prev is not None:
+                out[i] = np.mean(np.clip(level - self._prev, 0.0, ONSET_MAX_RISE_DB))
+            self._prev = level
+        return out
+
+
+def onsets(samples, sample_rate: float, period: float = FRAME_PERIOD) -> np.ndarray:
+    """Onset strength frames of a whole recording [dB], one per period."""
+    return OnsetMeter(sample_rate, period).feed(samples)
 
 
 def mono(samples) -> np.ndarray:
@@ -133,9 +205,14 @@ def _read_with_soundfile(path: Path, cause: Exception):
 
 def wav_loudness(path, period: float = FRAME_PERIOD) -> np.ndarray:
     """Loudness frames of an audio file [full scale], one per period."""
+    return wav_frames(path, period)[0]
+
+
+def wav_frames(path, period: float = FRAME_PERIOD) -> tuple[np.ndarray, np.ndarray]:
+    """Loudness [full scale] and onset strength [dB] frames of an audio file, one per period."""
     x, rate = read_wav(path)
     try:
-        return loudness(x, rate, period)
+        return loudness(x, rate, period), onsets(x, rate, period)
     except AudioError as exc:
         raise AudioError(f"{path}: {exc}") from None
 

@@ -1,5 +1,6 @@
 """Show files: the taught position of every axis every tick, and the music's
-stored loudness every tick, with metadata. CSV (human-editable) and NPZ;
+stored loudness (and, when taught from a recording, its onset strength)
+every tick, with metadata. CSV (human-editable) and NPZ;
 both formats are described in docs/formats.md.
 """
 from __future__ import annotations
@@ -15,6 +16,7 @@ from marionette.config import UNITS, FigureConfig
 from marionette.errors import ShowError
 
 CSV_MAGIC = "# marionette show 1"
+ONSET_COLUMN = "onset_db"       # optional CSV column after loudness: the stored onset strength [dB]
 LIMIT_POLICIES = ("error", "clamp", "compress")
 
 
@@ -32,6 +34,7 @@ class Show:
     path: str = "<memory>"           # file it was read from, for messages
     first_line: int = 0              # CSV line of tick 0 (0: not from a CSV)
     changes: list[str] = field(default_factory=list)  # what fitting to a figure changed
+    onsets: np.ndarray | None = None  # (ticks,) stored onset strength [dB], >= 0; None: not stored
 
     @property
     def n_ticks(self) -> int:
@@ -55,10 +58,11 @@ class Show:
         """Write as CSV or NPZ, by the file's suffix."""
         path = Path(path)
         if path.suffix == ".npz":
+            extra = {} if self.onsets is None else {"onsets": self.onsets}
             np.savez_compressed(path, positions=self.positions, loudness=self.loudness,
                                 axis_names=np.array(self.axis_names), units=np.array(self.units),
                                 tick_period=np.float64(self.tick_period),
-                                source=np.array(self.source), music=np.array(self.music))
+                                source=np.array(self.source), music=np.array(self.music), **extra)
         elif path.suffix == ".csv":
             self._save_csv(path)
         else:
@@ -70,9 +74,11 @@ class Show:
                     f"# source: {self.source}\n# music: {self.music}\n"
                     f"# units: {','.join(self.units)}\n")
             w = csv.writer(f, lineterminator="\n")
-            w.writerow(["tick", "loudness", *self.axis_names])
+            onset = [] if self.onsets is None else [ONSET_COLUMN]
+            w.writerow(["tick", "loudness", *onset, *self.axis_names])
             for k in range(self.n_ticks):
-                w.writerow([k, repr(float(self.loudness[k])),
+                onset = [] if self.onsets is None else [repr(float(self.onsets[k]))]
+                w.writerow([k, repr(float(self.loudness[k])), *onset,
                             *(repr(float(v)) for v in self.positions[:, k])])
 
 
@@ -109,9 +115,10 @@ def _read_csv(path: Path) -> Show:
                 if line_no == 1:
                     raise ShowError(f"{path}, line 1: expected {CSV_MAGIC!r}")
                 header = [c.strip() for c in cells]
-                if header[:2] != ["tick", "loudness"] or len(header) < 3:
+                with_onsets = len(header) > 2 and header[2] == ONSET_COLUMN
+                if header[:2] != ["tick", "loudness"] or len(header) < 3 + with_onsets:
                     raise ShowError(f"{path}, line {line_no}: header must be "
-                                    f"'tick,loudness,<axis>,...', found {text!r}")
+                                    f"'tick,loudness,[{ONSET_COLUMN},]<axis>,...', found {text!r}")
                 dup = {h for h in header if header.count(h) > 1}
                 if dup:
                     raise ShowError(f"{path}, line {line_no}: duplicate column(s) {sorted(dup)}")
@@ -129,16 +136,18 @@ def _read_csv(path: Path) -> Show:
     if header is None or not rows:
         raise ShowError(f"{path}: no data rows")
     data = np.array(rows, dtype=np.float64)
-    names = header[2:]
+    first_axis = 3 if header[2] == ONSET_COLUMN else 2       # [column]
+    names = header[first_axis:]
     try:
         period = float(meta.get("tick_period", "0.02"))
     except ValueError:
         raise ShowError(f"{path}: tick_period {meta['tick_period']!r} is not a number") from None
     units = [u.strip() for u in meta["units"].split(",")] if "units" in meta else ["m"] * len(names)
-    return Show(axis_names=names, units=units, positions=data[:, 1:].T.copy(),
+    return Show(axis_names=names, units=units, positions=data[:, first_axis - 1:].T.copy(),
                 loudness=data[:, 0].copy(), tick_period=period,
                 source=meta.get("source", ""), music=meta.get("music", ""),
-                path=str(path), first_line=first_line)
+                path=str(path), first_line=first_line,
+                onsets=data[:, 1].copy() if first_axis == 3 else None)
 
 
 def _read_npz(path: Path) -> Show:
@@ -154,7 +163,8 @@ def _read_npz(path: Path) -> Show:
                         loudness=np.array(z["loudness"], dtype=np.float64),
                         tick_period=float(z["tick_period"]) if "tick_period" in z.files else 0.02,
                         source=str(z["source"]) if "source" in z.files else "",
-                        music=str(z["music"]) if "music" in z.files else "", path=str(path))
+                        music=str(z["music"]) if "music" in z.files else "", path=str(path),
+                        onsets=np.array(z["onsets"], dtype=np.float64) if "onsets" in z.files else None)
     except (OSError, ValueError) as exc:
         if isinstance(exc, ShowError):
             raise
@@ -185,6 +195,15 @@ def validate(show: Show) -> None:
     if bad.size:
         k = bad[0]
         raise ShowError(f"{show.locate(k)}: loudness {float(show.loudness[k])!r} must be finite and >= 0")
+    if show.onsets is not None:
+        if show.onsets.shape != (p.shape[1],):
+            raise ShowError(f"{show.path}: {ONSET_COLUMN} has shape {show.onsets.shape}, "
+                            f"expected ({p.shape[1]},)")
+        bad = np.flatnonzero(~(np.isfinite(show.onsets) & (show.onsets >= 0)))
+        if bad.size:
+            k = bad[0]
+            raise ShowError(f"{show.locate(k)}: {ONSET_COLUMN} {float(show.onsets[k])!r} "
+                            "must be finite and >= 0")
 
 
 def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") -> Show:

@@ -9,8 +9,8 @@ from marionette.bench.music import synthesize
 from marionette.bench.tape import Deck, play
 from marionette._core import FLAG_MOVING
 from marionette.engine import Engine
-from marionette.follow import FollowError, sync_ticks
-from marionette.loudness import loudness
+from marionette.follow import Follower, FollowError, sync_ticks
+from marionette.loudness import loudness, onsets
 from marionette.show import Show
 
 T = 0.020
@@ -71,6 +71,39 @@ def test_the_music_drives_the_show(taught, mode):
     # blend (online moves), then plays
     lock = np.flatnonzero(locked)[0]
     assert r["flags"][lock] & FLAG_MOVING and not np.any(r["flags"][after] & FLAG_MOVING)
+
+
+def test_the_engine_follows_with_onsets_as_sync_sim_does():
+    """A show taught with onsets: the engine's follower, fed loudness and
+    onset per tick, gives the positions of Follower(..., onset=...) (what
+    sync-sim runs) tick for tick; a frame without its onset (a node's
+    LOUDNESS) is taken, and the tracker falls back to the loudness."""
+    piece = synthesize("ambient", seed=3)
+    stored, stored_onsets = loudness(piece.samples, piece.sample_rate), onsets(piece.samples, piece.sample_rate)
+    deck = Deck(speed=0.97, wow=0.003, reverb_s=0.5, snr_db=20.0, sample_rate=16000, start=30.0,
+                seconds=30.0, seed=5)
+    played = play(piece.samples, piece.sample_rate, deck)
+    live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
+    live_onsets = sync_ticks(onsets(played.samples, played.sample_rate))[:len(played.truth)]
+    rng = np.random.default_rng(8)
+    live_onsets[rng.random(len(live_onsets)) < 0.05] = np.nan          # some frames without
+    config = make_figure(1, max_speed=50.0, max_accel=5000.0)
+    show = show_for(config, stored)
+    show.onsets = stored_onsets
+    with Engine(config, show, follow="smooth", lead="none", interpolation="linear", record=True) as e:
+        for value, onset in zip(live, live_onsets):
+            if np.isfinite(value):
+                e.push_loudness(float(value), float(onset))
+            e.step(1)
+        r = e.records()
+    # tick 0 has no frame (the engine does not step its follower there)
+    reference = Follower(stored, onset=stored_onsets).run(live[1:], live_onsets[1:])
+    np.testing.assert_allclose(r["position"][1:], reference.position, rtol=0, atol=1e-9)
+    assert np.array_equal(r["follow_state"][1:], reference.state)
+    without = Follower(stored).run(live[1:])
+    assert not np.allclose(without.position, reference.position)      # the onsets did count
+    with Engine(config, show, follow="smooth") as e, pytest.raises(ValueError, match="onset -1.0"):
+        e.push_loudness(0.5, -1.0)
 
 
 def test_following_needs_the_stored_loudness():

@@ -23,13 +23,14 @@ from marionette.bench.music import synthesize
 from marionette.bench.tape import Deck, play
 from marionette.config import FollowConfig, config_from_dict
 from marionette.errors import ConfigError
-from marionette.follow import STATES, FollowError, Follower, c_options, sync_ticks
-from marionette.loudness import loudness
+from marionette.follow import FLAGS, STATES, FollowError, Follower, c_options, sync_ticks
+from marionette.loudness import loudness, onsets
 from conftest import figure_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 T = 0.020                                            # tick [s]
 LOCKED, HOLDING, PAUSED = (STATES.index(s) for s in ("locked", "holding", "paused"))
+FOUR_STYLES = (("pop", 1), ("waltz", 2), ("techno", 4), ("ambient", 3))    # (style, seed) of the pieces
 
 
 @pytest.fixture(scope="module")
@@ -71,6 +72,40 @@ def taught(style, seed):
     """A synthesized piece and its stored loudness, made once per session."""
     piece = synthesize(style, seed=seed)
     return piece, loudness(piece.samples, piece.sample_rate)
+
+
+def room_deck(rng, starts, seconds):
+    """A random deck in a reverberant room (RT60 0.3-0.6 s, 20 dB SNR), its
+    start drawn from starts = (first, last) [s], seconds long."""
+    return Deck(speed=float(rng.uniform(0.95, 1.05)), wow=0.003, wow_hz=0.6, snr_db=20.0,
+                reverb_s=float(rng.uniform(0.3, 0.6)), sample_rate=16000,
+                start=float(rng.uniform(*starts)), seconds=seconds, seed=int(rng.integers(1000)))
+
+
+@functools.cache
+def taught_onsets(style, seed):
+    """The onset strength of taught(style, seed)'s piece, made once per session."""
+    piece, _ = taught(style, seed)
+    return onsets(piece.samples, piece.sample_rate)
+
+
+def taught_with_onsets(*styles):
+    """For each (style, seed): the style, its synthesized piece, stored
+    loudness and stored onsets (each made once per session)."""
+    for style, seed in styles:
+        yield (style, *taught(style, seed), taught_onsets(style, seed))
+
+
+def onset_track(piece, stored, stored_onsets, deck, start=None):
+    """Runs the follower with onsets over the deck's recording (live loudness
+    and onset strength); start: a known start [stored ticks]. (track, played)"""
+    played = play(piece.samples, piece.sample_rate, deck)
+    live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
+    live_onsets = sync_ticks(onsets(played.samples, played.sample_rate))[:len(played.truth)]
+    f = Follower(stored, onset=stored_onsets)
+    if start is not None:
+        f.reset(start)
+    return f.run(live, live_onsets), played
 
 
 def lock_errors(style, seed, deck):
@@ -305,6 +340,225 @@ def test_a_stop_soon_after_a_volume_turn_is_caught(piece, stored):
     assert valid >= 12
     assert caught >= valid - 2                                # before: 7 of 15
 
+def test_a_long_first_search_listens_longer():
+    """Slow pads in a reverberant room look alike over 5 s at many places:
+    once the first search has run 5 s, its verification window grows a
+    tick per tick up to 10 s. Ten random ambient decks from unknown starts:
+    every one locks within 200 ms of the truth within 40 s, the median
+    within 15 s (with the 5 s window: one never locked, median 20 s)."""
+    piece, stored = taught("ambient", 3)
+    rng = np.random.default_rng(31)
+    lock_s = []
+    for case in range(10):
+        track, _, err, _ = live_track(piece, stored, room_deck(rng, (0.0, 100.0), 60.0))
+        lock_s.append(first_lock(track, err, within=0.2))
+    assert max(lock_s) <= 40.0 and np.median(lock_s) <= 15.0, lock_s
+
+
+def test_a_pause_holds_where_the_tape_stopped():
+    """The held position is fitted to the frames around the stop (music as
+    stored before it, the silence's level after): within 100 ms of where the
+    tape stopped in 24 random pop and techno decks (known start, one pause
+    of 2-5 s; 79 ms at worst, median 6 ms). The walk back to the last loud
+    frame held up to 311 ms off in techno, where hiss between the hits
+    reads as music."""
+    rng = np.random.default_rng(21)
+    errors = []
+    for style, seed in (("pop", 1), ("techno", 4)):
+        piece, stored = taught(style, seed)
+        for case in range(12):
+            start, at = float(rng.uniform(5.0, 60.0)), float(rng.uniform(8.0, 25.0))          # [s]
+            deck = Deck(speed=float(rng.uniform(0.95, 1.05)), wow=0.002, snr_db=float(rng.uniform(20, 30)),
+                        sample_rate=16000, start=start, pauses=((at, float(rng.uniform(2.0, 5.0))),),
+                        seconds=at + 8.0, seed=int(rng.integers(1000)))
+            played = play(piece.samples, piece.sample_rate, deck)
+            live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
+            f = Follower(stored)
+            f.reset(start / T)
+            track = f.run(live)
+            held = np.flatnonzero((track.state == PAUSED) & played.paused[:len(track.state)])
+            assert len(held), (style, case)
+            errors.append(abs(track.position[held[0]] * T - played.truth[held[0]]))
+    assert max(errors) <= 0.100 and np.median(errors) <= 0.010, np.round(np.array(errors) * 1e3, 1)
+
+
+def test_a_fade_read_as_a_stop_is_found_again_where_the_music_went_on():
+    """A volume turn down by 20-30 dB in 1.5-3 s during a quiet passage
+    reads as a stop (docs/music.md, known limits); the tape never stops
+    here. When the music rises again it plays on from where it would have
+    been, seconds past the held place, out of the resumed place's reach:
+    the near search also looks there. Forty random ambient decks (known
+    start): 5 such false pauses, 4 of them back within 50 ms 0.8 s after
+    the pause ends. Searching the whole piece instead, none was back
+    within 1 s (2.3-15 s)."""
+    piece, stored = taught("ambient", 3)
+    stored_onsets = taught_onsets("ambient", 3)
+    rng = np.random.default_rng(2)
+    back_after = []                                           # [s] per false pause
+    for case in range(40):
+        turn = float(rng.uniform(8.0, 25.0))                  # [s]
+        deck = Deck(speed=float(rng.uniform(0.95, 1.05)), wow=0.001, snr_db=20.0, sample_rate=11025,
+                    start=float(rng.uniform(0.0, piece.duration - 60.0)), seconds=45.0,
+                    gain_db=((0.0, 0.0), (turn, 0.0), (turn + float(rng.uniform(1.5, 3.0)),
+                                                       -float(rng.uniform(20.0, 30.0)))),
+                    seed=int(rng.integers(1000)))
+        track, played = onset_track(piece, stored, stored_onsets, deck, start=deck.start / T)
+        err = np.abs(track.position * T - played.truth)
+        for end in np.flatnonzero((track.state[:-1] == PAUSED) & (track.state[1:] != PAUSED)) + 1:
+            good = np.flatnonzero(err[end:] <= 0.05)
+            back_after.append(good[0] * T if len(good) else math.inf)
+    assert len(back_after) >= 4 and np.sum(np.array(back_after) <= 1.0) >= 3, back_after
+
+
+def test_a_tape_wound_while_stopped_is_not_locked_a_bar_off():
+    """The operator stops the tape, winds it 1.3-2.8 s either way and
+    starts it again: the resumed place is wrong by more than the near
+    search's reach (1 s), and music that repeats by the bar shows a peak
+    within reach a bar off the truth. The near search takes a peak only if
+    it leads every place within 3 s either way, so the whole-piece search
+    finds the place instead. Ten random decks each of waltz, pop and techno
+    (known start, one pause): no lock more than 0.5 s off the truth. With
+    rivals counted only within reach, 12 of them locked a bar off. (A wind
+    past 3 s may still: docs/music.md, known limits.)"""
+    rng = np.random.default_rng(31)
+    wrong = []
+    for style, piece, stored, stored_onsets in taught_with_onsets(("waltz", 2), ("pop", 1), ("techno", 4)):
+        for case in range(10):
+            start, at, pause = (float(rng.uniform(*r)) for r in ((5.0, 40.0), (12.0, 20.0), (2.0, 4.0)))
+            speed = float(rng.uniform(0.95, 1.05))
+            wound = float(rng.choice([-1.0, 1.0]) * rng.uniform(1.3, 2.8))         # [s] of music
+            deck = Deck(speed=speed, snr_db=30.0, sample_rate=16000, start=start, pauses=((at, pause),),
+                        jump=(at + 0.5 * pause, start + at * speed + wound), seconds=at + pause + 10.0,
+                        seed=int(rng.integers(1000)))
+            track, played = onset_track(piece, stored, stored_onsets, deck, start=start / T)
+            err = track.position * T - played.truth
+            wrong += [(style, case, round(float(err[k]), 2)) for k in lock_entries(track) if abs(err[k]) > 0.5]
+    assert not wrong, wrong
+
+
+def test_after_a_long_hold_weak_fits_do_not_claim_a_lock():
+    """More than a second without a fitting measurement leaves the place
+    the flywheel's guess: LOCKED comes back by a lock, or once the
+    confidence has recovered to 0.5, not on the first weak fit. The case
+    behind it: in the waltz's pianissimo passage (under the hiss) a stop
+    goes unnoticed; if it lasts a whole number of bars the flywheel lands
+    bars off, and faint music fits there too. Twenty random decks (known
+    start, the volume turned up 20 dB before the stop): every return to
+    LOCKED without a lock after such a hold has confidence 0.5 or more.
+    Before, 10 returns came at 0.10-0.39, two of them 2.1 and 3.2 s off."""
+    piece, stored = taught("waltz", 2)
+    stored_onsets = taught_onsets("waltz", 2)
+    bar = 3 * 60.0 / 168.0                                    # [s] of music
+    rng = np.random.default_rng(5)
+    returns, weak = 0, []
+    for case in range(20):
+        speed, start = float(rng.uniform(0.95, 1.05)), float(rng.uniform(40.0, 46.0))
+        at = (float(rng.uniform(52.0, 57.0)) - start) / speed                   # [s] live: in the pp
+        stop = (int(rng.integers(2, 4)) * bar + float(rng.uniform(-0.06, 0.06))) / speed    # [s]
+        deck = Deck(speed=speed, wow=0.001, snr_db=20.0, sample_rate=11025, start=start,
+                    pauses=((at, stop),), gain_db=((0.0, 0.0), (at - 6.0, 0.0), (at - 4.0, 20.0)),
+                    seconds=at + 12.0, seed=int(rng.integers(1000)))
+        track, _ = onset_track(piece, stored, stored_onsets, deck, start=start / T)
+        measured = (track.flags & FLAGS["measured"]) != 0
+        gap = longest = 0                 # ticks without a measurement: now, longest since LOCKED
+        for k in range(1, len(track.state)):
+            if (track.state[k] == LOCKED and track.state[k - 1] == HOLDING
+                    and not track.flags[k] & FLAGS["jump"] and longest > 50):
+                returns += 1
+                if track.confidence[k] < 0.5:
+                    weak.append((case, round(float(track.confidence[k]), 2)))
+            gap = 0 if measured[k] else gap + 1
+            longest = 0 if track.state[k] == LOCKED else max(longest, gap)
+    assert returns >= 5 and not weak, (returns, weak)
+
+
+def test_a_stop_while_searching_starts_the_search_again_at_the_restart():
+    """While searching there is no place to expect music at, so a stop
+    shows only as steady hiss; after a second of it, the search makes no
+    lock, and it starts again on the frames from the restart on (those
+    before a stop may be another stretch of tape, and silence in the window
+    matches quiet stored passages). Forty random decks, ten per style
+    (unknown start, a stop of 3-8 s beginning 1.5-3 s in, before the first
+    lock): median time from the restart to a lock within 50 ms 2.6 s; 3.6 s
+    with the search going on through the stop."""
+    rng = np.random.default_rng(2)
+    after = []                                                # [s] per deck
+    for _, piece, stored, stored_onsets in taught_with_onsets(*FOUR_STYLES):
+        for case in range(10):
+            at, stop = float(rng.uniform(1.5, 3.0)), float(rng.uniform(3.0, 8.0))       # [s]
+            deck = Deck(speed=float(rng.uniform(0.95, 1.05)), wow=0.002, snr_db=float(rng.uniform(20, 30)),
+                        sample_rate=16000, start=float(rng.uniform(5.0, piece.duration - 40.0)),
+                        pauses=((at, stop),), seconds=at + stop + 20.0, seed=int(rng.integers(1000)))
+            track, played = onset_track(piece, stored, stored_onsets, deck)
+            err = track.position * T - played.truth
+            after.append(first_lock(track, err, after=at + stop) - at - stop)
+    assert np.median(after) <= 3.0, np.round(after, 2)
+
+
+def test_a_small_jump_is_found_by_the_search_beside():
+    """A jump of 0.1-0.45 s (a splice, a skip) lies beyond the tracking lags
+    but within 0.5 s, where the search's candidates count as one place.
+    The tracker's own pool entry stands only for its lags, so the search
+    verifies the place a few ticks away and locks there. Forty random
+    decks, ten per style (known start, one jump either way): median time
+    from the jump to LOCKED within 50 ms 3.7 s; 6.4 s while the tracker's
+    entry took in every offer within 0.5 s."""
+    rng = np.random.default_rng(1)
+    after = []                                                # [s] per deck
+    for _, piece, stored, stored_onsets in taught_with_onsets(*FOUR_STYLES):
+        for case in range(10):
+            speed, start = float(rng.uniform(0.95, 1.05)), float(rng.uniform(5.0, piece.duration - 50.0))
+            at = float(rng.uniform(10.0, 20.0))                                    # [s] live
+            by = float(rng.choice([-1.0, 1.0]) * rng.uniform(0.1, 0.45))            # [s] of music
+            deck = Deck(speed=speed, wow=0.002, snr_db=30.0, sample_rate=16000, start=start,
+                        jump=(at, start + at * speed + by), seconds=at + 20.0, seed=int(rng.integers(1000)))
+            track, played = onset_track(piece, stored, stored_onsets, deck, start=start / T)
+            after.append(first_lock(track, track.position * T - played.truth, after=at) - at)
+    assert np.median(after) <= 4.5, np.round(after, 2)
+
+
+def test_onsets_keep_the_place_in_a_reverberant_room():
+    """A room colours each held chord by its own gain, which moves the
+    loudness correlation's peak; the onset strength does not carry it.
+    Eight random decks of the ambient piece (pads, few onsets) in rooms
+    with RT60 0.3-0.6 s, known start: the share of ticks within 20 ms.
+    Loudness alone keeps 2 of them within 20 ms for 80 % of the ticks. Two
+    decks (4.4 % fast from 71 s) lose the place before the tracker has the
+    rate, and the whole-piece search does not find it again in the room
+    (docs/music.md, known limits)."""
+    piece, stored = taught("ambient", 3)
+    stored_onsets = taught_onsets("ambient", 3)
+    rng = np.random.default_rng(12)
+    shares = []
+    for case in range(8):
+        deck = room_deck(rng, (10.0, 80.0), 40.0)
+        track, played = onset_track(piece, stored, stored_onsets, deck, start=deck.start / T)
+        err = np.abs(track.position * T - played.truth)[int(3.0 / T):]
+        shares.append(np.mean(err <= 0.020))
+    assert np.sum(np.array(shares) >= 0.8) >= 6, np.round(shares, 3)
+
+
+def test_a_lock_takes_the_onset_features_second_opinion_on_the_rate():
+    """A lock's rate comes from the lags of two half windows; in a room the
+    loudness lags of held chords wander, so the onset feature measures the
+    same correction again and the lock takes the mean of the two. Twelve
+    random ambient room decks (unknown start): at the first lock within
+    0.2 s of the truth the rate is off from the deck's speed by 0.12 % in
+    the median (0.32 % on the loudness alone)."""
+    piece, stored = taught("ambient", 3)
+    stored_onsets = taught_onsets("ambient", 3)
+    rng = np.random.default_rng(7)
+    rate_errors = []
+    for case in range(12):
+        deck = room_deck(rng, (0.0, 100.0), 40.0)
+        track, played = onset_track(piece, stored, stored_onsets, deck)
+        entries = lock_entries(track)
+        right = entries[np.abs(track.position[entries] * T - played.truth[entries]) <= 0.2]
+        if len(right):
+            rate_errors.append(abs(track.rate[right[0]] - deck.speed))
+    assert len(rate_errors) >= 10 and np.median(rate_errors) <= 0.002, np.round(rate_errors, 4)
+
+
 def test_known_start_follows_at_once(piece, stored):
     deck = Deck(speed=1.0, snr_db=30.0, start=30.0, seconds=15.0, seed=4)
     track, played, err, f = live_track(piece, stored, deck, start=30.0 / T)
@@ -386,6 +640,12 @@ def test_python_api_refuses_bad_arguments(stored):
         Follower(stored, window=1)
     with pytest.raises(FollowError, match="1-d"):
         Follower(stored).run(np.zeros((2, 2)))
+    with pytest.raises(FollowError, match="stored onsets: shape"):
+        Follower(stored, onset=np.zeros(3))
+    with pytest.raises(FollowError, match="stored onset\\[2\\] = nan"):
+        Follower(stored, onset=np.where(np.arange(len(stored)) == 2, np.nan, 0.0))
+    with pytest.raises(FollowError, match="live onsets: shape"):
+        Follower(stored, onset=np.zeros(len(stored))).run(np.zeros(5), np.zeros(4))
 
 
 def test_settings_in_seconds_become_ticks():

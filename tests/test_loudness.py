@@ -2,7 +2,9 @@
 (marionette.live_audio).
 
 The feature is the same at teach and show time: linear in the volume, the
-same at any sample rate from 8 kHz up, framed on the 20 ms tick grid. There
+same at any sample rate from 8 kHz up, framed on the 20 ms tick grid. The
+onset strength beside it ignores the volume, marks a note's start and not
+its end, and reads tape hiss as small. There
 is no sound card on the test machines, so the live source is exercised with
 a fake ``sounddevice`` module (its block stream, its device list) and with
 no module at all.
@@ -17,8 +19,8 @@ import pytest
 
 from marionette import live_audio
 from marionette.follow import Follower, sync_ticks
-from marionette.loudness import (BAND, FRAME_PERIOD, AudioError, LoudnessMeter, loudness, read_wav,
-                                 wav_loudness, write_wav)
+from marionette.loudness import (BAND, FRAME_PERIOD, AudioError, LoudnessMeter, OnsetMeter, loudness,
+                                 onsets, read_wav, wav_frames, wav_loudness, write_wav)
 
 T = FRAME_PERIOD
 
@@ -82,17 +84,73 @@ def test_frames_lie_on_the_tick_grid():
             assert np.count_nonzero(frames) == 1
 
 
+def feed_in_blocks(meter, x, rng, longest: int) -> np.ndarray:
+    """The meter's frames of x fed in random blocks of 1 to longest - 1 samples."""
+    parts, i = [], 0
+    while i < len(x):
+        n = int(rng.integers(1, longest))
+        parts.append(meter.feed(x[i:i + n]))
+        i += n
+    return np.concatenate(parts)
+
+
 def test_streaming_in_any_blocks_equals_one_go():
     rng = np.random.default_rng(5)
     x = music(11025, 3.0, 1)
     whole = loudness(x, 11025)
-    meter = LoudnessMeter(11025)
-    parts, i = [], 0
-    while i < len(x):
-        n = int(rng.integers(1, 700))
-        parts.append(meter.feed(x[i:i + n]))
-        i += n
-    assert np.allclose(np.concatenate(parts), whole, rtol=1e-12, atol=0.0)
+    assert np.allclose(feed_in_blocks(LoudnessMeter(11025), x, rng, 700), whole, rtol=1e-12, atol=0.0)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_onsets_ignore_the_volume_knob(seed):
+    """The knob turns music and tape hiss alike (digital silence is another
+    matter: a rise from it depends on the level, see OnsetMeter)."""
+    x = music(16000, 3.0, seed) + 3e-3 * np.random.default_rng(seed).standard_normal(48000)
+    base = onsets(x, 16000)
+    assert base.max() > 3.0                                   # the notes start somewhere
+    for gain_db in (-20.0, -6.0, 6.0, 20.0):
+        assert np.allclose(onsets(10 ** (gain_db / 20) * x, 16000), base, rtol=0.0, atol=1e-6), gain_db
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_onsets_are_the_same_at_any_sample_rate(seed):
+    ref = onsets(music(16000, 4.0, seed), 16000)
+    for fs in (8000, 11025, 22050, 44100):
+        frames = onsets(music(fs, 4.0, seed), fs)
+        n = min(len(ref), len(frames))
+        assert np.corrcoef(frames[:n], ref[:n])[0, 1] > 0.98, fs
+
+
+def test_an_onset_marks_a_note_start_and_not_its_end():
+    rng = np.random.default_rng(3)
+    for case in range(8):
+        fs = float(rng.choice([8000, 16000, 22050]))
+        t = np.arange(int(2.0 * fs)) / fs
+        on, off = rng.uniform(0.3, 0.8), rng.uniform(1.2, 1.6)                # [s]
+        release = np.clip(1.0 - (t - off) / 0.1, 0.0, 1.0)                   # a 100 ms fade
+        tone = 0.3 * np.sin(2 * np.pi * rng.uniform(200.0, 3000.0) * t) * release
+        x = np.where(t >= on, tone, 0.0) + 1e-3 * rng.standard_normal(len(t))
+        o = onsets(x, fs)
+        k_on = int(on / T)                                     # the frame the tone starts in
+        assert o[k_on:k_on + 2].max() > 10.0, case           # [dB]
+        assert np.delete(o, [k_on, k_on + 1]).max() < 2.0, case
+
+
+def test_hiss_reads_as_small_onsets():
+    rng = np.random.default_rng(4)
+    for fs in (8000, 11025, 16000, 44100):
+        hiss = onsets(rng.standard_normal(int(10 * fs)) * 10 ** rng.uniform(-4, -1), fs)
+        assert np.quantile(hiss[50:], 0.99) < 1.0 and np.median(hiss[50:]) < 0.3, fs     # [dB]
+
+
+def test_onsets_stream_in_any_blocks_as_in_one_go(tmp_path):
+    rng = np.random.default_rng(6)
+    x = music(22050, 3.0, 2)
+    assert np.allclose(feed_in_blocks(OnsetMeter(22050), x, rng, 900), onsets(x, 22050),
+                       rtol=1e-12, atol=1e-12)
+    write_wav(tmp_path / "m.wav", x, 22050)
+    level, onset = wav_frames(tmp_path / "m.wav")
+    assert len(level) == len(onset) == len(loudness(x, 22050))
 
 
 def test_sample_rate_too_low_is_refused():

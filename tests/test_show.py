@@ -18,11 +18,17 @@ def test_round_trip_many_random_shows(tmp_path, rng, suffix):
         show = make_show(config, rng.uniform(-1, 1, (len(config.axes), ticks)),
                          rng.uniform(0, 2, ticks))
         show.source, show.music = f"case {case}", "song, live.wav"
+        if case % 2:                                  # taught from a recording: onsets stored too
+            show.onsets = rng.uniform(0, 30, ticks)
         path = tmp_path / f"s{case}{suffix}"
         show.save(path)
         back = load_show(path, config)
         np.testing.assert_array_equal(back.positions, show.positions)
         np.testing.assert_array_equal(back.loudness, show.loudness)
+        if case % 2:
+            np.testing.assert_array_equal(back.onsets, show.onsets)
+        else:
+            assert back.onsets is None
         assert back.axis_names == show.axis_names and back.units == show.units
         assert (back.tick_period, back.source, back.music) == (0.02, show.source, show.music)
 
@@ -56,6 +62,18 @@ def test_bad_csv_names_line_axis_and_value(tmp_path, body, expected):
     for part in expected:
         assert part in str(info.value), f"{part!r} not in {info.value}"
     assert "show.csv" in str(info.value)
+
+
+@pytest.mark.parametrize("header,body,expected", [
+    ("tick,loudness,onset_db,a0,a1", "0,0.1,2.0,0.0,0.0\n1,0.1,-3.0,0.0,0.0\n", ["line 5", "onset_db", "-3.0"]),
+    ("tick,loudness,onset_db,a0,a1", "0,0.1,nan,0.0,0.0\n", ["line 4", "'onset_db'", "nan"]),
+    ("tick,loudness,onset_db", "0,0.1,0.5\n", ["line 3", "header must be"]),     # no axis
+])
+def test_bad_onset_column_names_line_and_value(tmp_path, header, body, expected):
+    with pytest.raises(ShowError) as info:
+        load_show(_csv(tmp_path, body, header), make_figure(2))
+    for part in expected:
+        assert part in str(info.value), f"{part!r} not in {info.value}"
 
 
 def test_unknown_missing_axis_and_wrong_period(tmp_path):

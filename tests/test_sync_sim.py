@@ -40,12 +40,12 @@ def read_track(path):
     return rows
 
 
-@pytest.mark.parametrize("mode", ["smooth", "paper"])
-def test_sync_sim_follows_and_reports_accuracy(recordings, capsys, mode):
+@pytest.mark.parametrize("mode,extra", [("smooth", []), ("paper", []), ("smooth", ["--loudness-only"])])
+def test_sync_sim_follows_and_reports_accuracy(recordings, capsys, mode, extra):
     d, played = recordings
-    out = d / f"track_{mode}.csv"
+    out = d / f"track_{mode}{len(extra)}.csv"
     code = cli.main(["sync-sim", "--taught", str(d / "taught.wav"), "--live", str(d / "live.wav"),
-                     "--out", str(out), "--mode", mode, "--truth", str(d / "truth.csv")])
+                     "--out", str(out), "--mode", mode, "--truth", str(d / "truth.csv"), *extra])
     text = capsys.readouterr().out
     assert code == 0, text
     rows = read_track(out)

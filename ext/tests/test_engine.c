@@ -45,7 +45,8 @@ static void test_limits_random(int cases)
                                    .start_holding = c % 5 == 0, .follow = c % 4 == 3 };
         mar_follow_default_options(&opt.follow_opt);   /* the music drives p and r in every 4th case */
         int status;
-        mar_engine *e = mar_engine_create(&opt, axes, AXES, show, TICKS, loud, &status);
+        /* every 8th case follows with onsets (the loudness stands in for them) */
+        mar_engine *e = mar_engine_create(&opt, axes, AXES, show, TICKS, loud, c % 8 == 7 ? loud : NULL, &status);
         CHECK(e != NULL, "create failed: %d", status);
         if (!e)
             continue;
@@ -56,8 +57,8 @@ static void test_limits_random(int cases)
         for (int j = 0; j < AXES; j++)   /* some targets outside the limits: clamped */
             pose[j] = uniform(axes[j].limits.pos_min - 0.2, axes[j].limits.pos_max + 0.2);
         long before = allocations;
-        for (int i = 0; i < 12; i++)    /* live frames, a refused one among them */
-            mar_engine_push_loudness(e, i == 5 ? -1.0 : uniform(0, 1));
+        for (int i = 0; i < 12; i++)    /* live frames, refused ones among them, some without onsets */
+            mar_engine_push_frame(e, i == 5 ? -1.0 : uniform(0, 1), i == 7 ? -1.0 : i % 3 ? 0.5 * i : NAN);
         mar_engine_step(e, TICKS / 4);
         mar_engine_seek(e, uniform(0, TICKS));
         mar_engine_set_rate(e, uniform(0, 3));
@@ -106,12 +107,15 @@ static void test_bad_inputs(void)
     mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_DEAD_TIME_LAG,
                                .interp = MAR_INTERP_CUBIC, .record_slots = 8, .loudness_slots = 4 };
     int status;
-    mar_engine *e = mar_engine_create(&opt, &axis, 1, show, 4, loud, &status);
+    mar_engine *e = mar_engine_create(&opt, &axis, 1, show, 4, loud, NULL, &status);
     CHECK(e != NULL, "create");
     CHECK(mar_engine_set_rate(e, NAN) < 0, "NaN rate accepted");
     CHECK(mar_engine_seek(e, INFINITY) < 0, "infinite seek accepted");
     CHECK(mar_engine_push_loudness(e, -1.0) < 0, "negative loudness accepted");
     CHECK(mar_engine_push_loudness(e, NAN) < 0, "NaN loudness accepted");
+    CHECK(mar_engine_push_frame(e, 0.4, -1.0) < 0, "negative onset accepted");
+    CHECK(mar_engine_push_frame(e, 0.4, INFINITY) < 0, "infinite onset accepted");
+    CHECK(mar_engine_push_frame(e, 0.4, 2.0) == 0, "good frame refused");
     CHECK(mar_engine_push_loudness(e, 0.5) == 0, "good loudness refused");
     mar_engine_step(e, 3);
     mar_record r;
@@ -120,18 +124,18 @@ static void test_bad_inputs(void)
     CHECK(r.live_loudness == 0.5, "live loudness %g", r.live_loudness);
     mar_counters cnt;
     mar_engine_counters(e, &cnt);
-    CHECK(cnt.bad_input == 4, "bad inputs counted %llu", (unsigned long long)cnt.bad_input);
+    CHECK(cnt.bad_input == 6, "bad inputs counted %llu", (unsigned long long)cnt.bad_input);
     mar_engine_destroy(e);
 
     /* refused configurations */
     double nan_show[4] = { 0, NAN, 0, 0 };
-    CHECK(mar_engine_create(&opt, &axis, 1, nan_show, 4, loud, &status) == NULL, "NaN show accepted");
+    CHECK(mar_engine_create(&opt, &axis, 1, nan_show, 4, loud, NULL, &status) == NULL, "NaN show accepted");
     mar_axis reversed = axis;
     reversed.limits.pos_min = 2;
-    CHECK(mar_engine_create(&opt, &reversed, 1, show, 4, loud, &status) == NULL, "reversed limits accepted");
+    CHECK(mar_engine_create(&opt, &reversed, 1, show, 4, loud, NULL, &status) == NULL, "reversed limits accepted");
     mar_axis outside = axis;
     outside.start = 5;
-    CHECK(mar_engine_create(&opt, &outside, 1, show, 4, loud, &status) == NULL, "start outside limits accepted");
+    CHECK(mar_engine_create(&opt, &outside, 1, show, 4, loud, NULL, &status) == NULL, "start outside limits accepted");
 }
 
 /* The sink emits version-1 frames, serial and CAN, without allocating:
@@ -154,7 +158,7 @@ static void test_sink(void)
             mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
                                        .record_slots = TICKS, .loudness_slots = 4 };
             int status, fds[2] = { -1, -1 };
-            mar_engine *e = mar_engine_create(&opt, axes, AXES, show, TICKS, loud, &status);
+            mar_engine *e = mar_engine_create(&opt, axes, AXES, show, TICKS, loud, NULL, &status);
             CHECK(e != NULL, "create: %d", status);
             if (!e)
                 return;
@@ -251,7 +255,7 @@ static void test_sink(void)
     bad.address.node = 0;
     mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
                                .loudness_slots = 4 };
-    mar_engine *e = mar_engine_create(&opt, &bad, 1, one, 2, one, &status);
+    mar_engine *e = mar_engine_create(&opt, &bad, 1, one, 2, one, NULL, &status);
     CHECK(mar_sink_set(mar_engine_sink(e), MAR_SINK_RING, -1, 4, MAR_SINK_CAN) == -22, "node 0 on CAN");
     CHECK(mar_sink_set(mar_engine_sink(e), MAR_SINK_RING, -1, 4, 7) == -22, "unknown protocol");
     CHECK(mar_sink_set(mar_engine_sink(e), MAR_SINK_RING, -1, 4, MAR_SINK_SERIAL) == 0, "node 0 on serial");
@@ -294,7 +298,7 @@ static void test_rtloop(void)
     mar_engine_options opt = { .period = 0.005, .lead_mode = MAR_LEAD_DEAD_TIME_LAG,
                                .interp = MAR_INTERP_CUBIC, .record_slots = 256, .loudness_slots = 4 };
     int status;
-    mar_engine *e = mar_engine_create(&opt, &axis, 1, show, 100, loud, &status);
+    mar_engine *e = mar_engine_create(&opt, &axis, 1, show, 100, loud, NULL, &status);
     mar_rtloop loop;
     memset(&loop, 0, sizeof loop);
     mar_rt_options ro = { 0, -1, 0, 40 };

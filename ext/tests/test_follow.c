@@ -75,23 +75,36 @@ static void test_bad_options(void)
     CHECK(!mar_follow_create(&o, negative, 4, &status) && status < 0, "negative stored accepted");
     status = 0;
     CHECK(!mar_follow_create(&o, stored, 1, &status) && status < 0, "one stored frame accepted");
+    double level[4] = {0.1, 0.2, 0.3, 0.4};
+    status = 0;
+    CHECK(!mar_follow_create_onsets(&o, level, with_nan, 4, &status) && status < 0, "NaN onset accepted");
+    status = 0;
+    CHECK(!mar_follow_create_onsets(&o, level, negative, 4, &status) && status < 0, "negative onset accepted");
+    o.onset_weight = -1.0;
+    status = 0;
+    CHECK(!mar_follow_create_onsets(&o, level, level, 4, &status) && status < 0, "negative onset weight accepted");
 }
 
 /* Random stored music, random live input (music, silence, noise, NaN,
- * negative, infinite): every output sane, no step allocates. */
+ * negative, infinite; with and without onsets, and bad onsets): every
+ * output sane, no step allocates. */
 static void test_random_inputs(int cases)
 {
     enum { N = 3000, STEPS = 2500 };
-    static double stored[N];
+    static double stored[N], stored_onset[N];
     for (int c = 0; c < cases; c++) {
         music(stored, N, (double)c);
+        int onsets = c % 4 < 2;
+        for (size_t i = 0; i < N; i++)
+            stored_onset[i] = fabs(sin(0.37 * (double)i + (double)c));
         mar_follow_options o;
         mar_follow_default_options(&o);
         o.mode = c % 3 == 2 ? MAR_FOLLOW_PAPER : MAR_FOLLOW_SMOOTH;
         o.search_budget = (size_t)uniform(1.0, 2000.0);
         o.delay = uniform(0.0, 3.0);
         int status = 0;
-        mar_follow *f = mar_follow_create(&o, stored, N, &status);
+        mar_follow *f = onsets ? mar_follow_create_onsets(&o, stored, stored_onset, N, &status)
+                               : mar_follow_create(&o, stored, N, &status);
         CHECK(f, "create failed: %d", status);
         if (!f)
             continue;
@@ -112,8 +125,12 @@ static void test_random_inputs(int cases)
                 live = c % 2 ? 0.0 : 1e-3 * uniform(0.5, 1.0);     /* silence or hiss */
             else
                 live = live_at(stored, N, start, rate, k) * (k > 1800 ? 10.0 : 1.0);
+            /* onsets from u, not the generator: the music of later tests stays as it was */
+            double onset = u > 0.98 ? NAN : 3.0 * fabs(sin(0.7 * (double)k + (double)c));  /* NaN: none came */
+            if (onsets && u >= 0.04 && u < 0.05)
+                onset = u < 0.045 ? -u : INFINITY, bad++;
             mar_follow_out out;
-            mar_follow_step(f, live, &out);
+            mar_follow_step_onset(f, live, onset, &out);
             CHECK(isfinite(out.position) && out.position >= 0.0 && out.position <= (double)N,
                   "case %d step %zu: position %g", c, k, out.position);
             CHECK(isfinite(out.rate) && out.rate >= 0.0 && out.rate <= 2.0, "case %d step %zu: rate %g", c,
@@ -124,8 +141,12 @@ static void test_random_inputs(int cases)
                 CHECK(out.rate == 0.0 || out.rate == 1.0 || out.rate == 2.0, "paper rate %g", out.rate);
             if (!isfinite(live) || live < 0.0)
                 CHECK(out.flags & MAR_FOLLOW_F_NO_FRAME, "missing frame not flagged");
-            if (isfinite(live) && live < 0.0)
-                CHECK(out.flags & MAR_FOLLOW_F_BAD_INPUT, "negative frame not flagged");
+            int good_live = isfinite(live) && live >= 0.0;
+            int bad_onset = onsets && good_live && !isnan(onset) && !(isfinite(onset) && onset >= 0.0);
+            if ((isfinite(live) && live < 0.0) || bad_onset)
+                CHECK(out.flags & MAR_FOLLOW_F_BAD_INPUT, "negative frame or onset not flagged");
+            if (good_live && !bad_onset)
+                CHECK(!(out.flags & MAR_FOLLOW_F_NO_FRAME), "a good frame (onset %g) not taken", onset);
         }
         CHECK(allocations == before, "case %d: steps allocated %ld times", c, allocations - before);
         mar_follow_counters cnt;

@@ -8,8 +8,9 @@ drift, wow 0.1-0.5 % at 0.5-1 Hz, flutter at 4-10 Hz, gain ramps of up to
 +-20 dB, noise at 30/20/10 dB SNR, a reverberant room, pauses of 1 to 10 s,
 a start at an unknown point and a jump, at live sample rates 11.025 to
 22.05 kHz (the taught music is at 16 kHz). Ground truth comes from the
-deck's time warp. For every scenario the same loudness frames run through
-the C follower in both modes, tick by tick as in the engine (tick k gets
+deck's time warp. For every scenario the same loudness and onset frames
+(marionette.loudness) run through the C follower in both modes, tick by
+tick as in the engine (tick k gets
 live frame k - 1); the follower starts knowing nothing (searching). Five
 runs per piece and seed; by default four seeds (80 runs), so that tuning
 the follower to one set of scenarios does not pass. Pauses, gain ramps and
@@ -52,7 +53,7 @@ from marionette.bench._machine import describe, machine_info
 from marionette.bench.music import synthesize
 from marionette.bench.tape import Deck, play
 from marionette.follow import STATES, Follower, sync_ticks
-from marionette.loudness import FRAME_PERIOD, loudness
+from marionette.loudness import FRAME_PERIOD, loudness, onsets
 
 T = FRAME_PERIOD                # tick period [s]
 SEED = 20261122
@@ -210,6 +211,7 @@ def run(seconds: float | None = None, quick: bool = False, seed: int = SEED, pro
             piece.samples = piece.samples[:int(40 * piece.sample_rate)]
         pieces[style] = piece
     stored = {k: loudness(p.samples, p.sample_rate) for k, p in pieces.items()}
+    stored_onsets = {k: onsets(p.samples, p.sample_rate) for k, p in pieces.items()}
     durations = {k: p.duration for k, p in pieces.items()}
     runs = []
     for s in range(seed, seed + seeds):
@@ -222,9 +224,10 @@ def run(seconds: float | None = None, quick: bool = False, seed: int = SEED, pro
         t0 = time.perf_counter()
         played = play(pieces[sc.piece].samples, pieces[sc.piece].sample_rate, sc.deck)
         live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
+        live_onsets = sync_ticks(onsets(played.samples, played.sample_rate))[:len(played.truth)]
         for mode in per_mode:
-            follower = Follower(stored[sc.piece], mode=mode)
-            track = follower.run(live, timing=True)
+            follower = Follower(stored[sc.piece], mode=mode, onset=stored_onsets[sc.piece])
+            track = follower.run(live, live_onsets, timing=True)
             m = measure(track, played, track.ns)
             m.update(name=sc.name, target=sc.target, speed=sc.deck.speed, snr_db=sc.deck.snr_db,
                      seconds=len(played.truth) * T)

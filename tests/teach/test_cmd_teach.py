@@ -8,7 +8,7 @@ import pytest
 import taught_show
 from marionette import cli
 from marionette.config import load_config
-from marionette.loudness import wav_loudness, write_wav
+from marionette.loudness import wav_frames, wav_loudness, write_wav
 from marionette.progress import Progress
 from marionette.show import load_show
 from marionette.teach.axis_map import map_axes
@@ -85,6 +85,9 @@ def test_shaped_show_plays_and_carries_the_music(taught):
     loud = wav_loudness(taught.directory / "music.wav")
     assert loud.size == 400 and show.n_ticks == 398
     np.testing.assert_array_equal(show.loudness, loud[:show.n_ticks])
+    # and its onset strength beside it (the engine's follower tracks on both)
+    onset = wav_frames(taught.directory / "music.wav")[1]
+    np.testing.assert_array_equal(show.onsets, onset[:show.n_ticks])
     assert show.music == str(taught.directory / "music.wav")
     assert show.source.startswith("teach-in of") and "shaped" in show.source
     # the pragmatic filter keeps the servo limits and stays near the dance
