@@ -7,9 +7,6 @@
 
 #include "mar_time.h"
 
-#define FOLLOW_FRAMES_PER_TICK 8    /* live frames the follower takes in one tick, at most */
-#define FRAME_TIMEOUT 5             /* ticks without a live frame before the follower steps without */
-#define MAX_CATCH_UP 50             /* such steps in one tick, at most (after a long overrun) */
 
 struct mar_engine {
     mar_engine_options opt;
@@ -26,8 +23,6 @@ struct mar_engine {
     /* tick thread only */
     double position;                /* p [show ticks] */
     double rate;                    /* r [show ticks per tick] */
-    double live_loudness;           /* newest live frame taken, NaN before the first */
-    int64_t ticks_since_frame;      /* ticks since the follower's last live frame */
     uint32_t follow_flags;          /* MAR_FOLLOW_F_* of this tick's follower steps */
     mar_follow *follow;             /* NULL: the rate drives the playback clock */
     mar_follow_out follow_out;
@@ -84,11 +79,7 @@ static int check_axis(const mar_axis *a)
     return 0;
 }
 
-/* A live frame as it waits in the input ring. */
-typedef struct {
-    double loudness;            /* [full scale] */
-    double onset;               /* onset strength [dB], NaN when the source has none */
-} live_frame;
+typedef mar_follow_frame live_frame;    /* as it waits in the input ring */
 
 mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axes, size_t n_axes,
                               const double *show, size_t n_ticks, const double *loudness,
@@ -164,7 +155,6 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
         return NULL;
     }
     e->rate = 1.0;
-    e->live_loudness = NAN;
     e->mode = opt->start_holding ? MAR_MODE_HOLD : MAR_MODE_SHOW;
     atomic_init(&e->rate_request, 1.0);
     atomic_init(&e->seek_request, 0.0);
@@ -210,42 +200,22 @@ static double newest_live_loudness(mar_engine *e)
     return newest;
 }
 
-/* The playback clock from the live music. The follower steps once per live
- * frame, whenever frames come (audio arrives in blocks; a node's LOUDNESS
- * rides on its answer): up to FOLLOW_FRAMES_PER_TICK per tick, the rest wait
- * for the next tick, so a burst drains instead of adding latency. Between
- * frames the position runs on at the follower's rate. When no frame has come
- * for FRAME_TIMEOUT ticks the source is gone: the follower steps without a
- * frame every tick (its flywheel, then its pause detection). Returns the
- * newest frame taken, NaN if none. */
+/* The playback clock from the live music: the follower's own tick
+ * (mar_follow_tick) on the frames that came, as every offline tool runs it.
+ * Frames beyond MAR_FOLLOW_TICK_FRAMES wait in the ring for the next tick,
+ * so a burst drains instead of adding latency. Returns the newest frame
+ * taken, NaN if none. */
 static double follow_music(mar_engine *e, int64_t elapsed_periods, int seek, double seek_to)
 {
-    live_frame frames[FOLLOW_FRAMES_PER_TICK];
-    double newest = NAN;
+    mar_follow_frame frames[MAR_FOLLOW_TICK_FRAMES];
     if (seek)
         mar_follow_reset(e->follow, seek_to);
-    size_t n = mar_ring_pop(&e->loudness_in, frames, FOLLOW_FRAMES_PER_TICK);
-    e->follow_flags = 0;
-    for (size_t i = 0; i < n; i++) {
-        mar_follow_step_onset(e->follow, frames[i].loudness, frames[i].onset, &e->follow_out);
-        e->follow_flags |= e->follow_out.flags;
-    }
-    if (n > 0) {
-        newest = frames[n - 1].loudness;
-        e->ticks_since_frame = 0;
-    } else {
-        e->ticks_since_frame += elapsed_periods;
-        if (e->ticks_since_frame > FRAME_TIMEOUT) {     /* a step without a frame per tick */
-            for (int64_t k = 0; k < e->ticks_since_frame && k < MAX_CATCH_UP; k++) {
-                mar_follow_step(e->follow, NAN, &e->follow_out);
-                e->follow_flags |= e->follow_out.flags;
-            }
-            e->ticks_since_frame = 0;
-        }
-    }
-    e->position = e->follow_out.position + e->follow_out.rate * (double)e->ticks_since_frame;
+    size_t n = mar_ring_pop(&e->loudness_in, frames, MAR_FOLLOW_TICK_FRAMES);
+    mar_follow_tick(e->follow, frames, n, elapsed_periods, &e->follow_out);
+    e->follow_flags = e->follow_out.flags;
+    e->position = e->follow_out.position;
     e->rate = e->follow_out.rate;
-    return newest;
+    return n > 0 ? frames[n - 1].loudness : NAN;
 }
 
 static void publish_snapshot(mar_engine *e, const mar_record *rec)
@@ -338,8 +308,6 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         if (seek)
             e->position = seek_to;
     }
-    if (!isnan(frame))
-        e->live_loudness = frame;
     if (e->position < 0.0)
         e->position = 0.0;
     if (e->position >= last) {
@@ -391,7 +359,7 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         .time_ns = now_ns,
         .position = p,
         .rate = r,
-        .live_loudness = e->live_loudness,
+        .live_loudness = frame,          /* NaN: no new frame this tick */
         .stored_loudness = mar_sample(e->loudness, e->n_ticks, p, MAR_INTERP_LINEAR, &slope),
         .follow_confidence = e->follow ? e->follow_out.confidence : NAN,
         .flags = flags,

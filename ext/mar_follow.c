@@ -269,6 +269,11 @@ struct mar_follow {
     size_t scap;
     double *rs;                 /* resampled live values */
 
+    /* mar_follow_tick: the clock between frames */
+    mar_follow_out last;        /* the last step's answer */
+    int64_t ticks_since_frame;  /* ticks since the last frame [ticks] */
+    int64_t unstepped;          /* ticks since the last step [ticks] */
+
     mar_follow_counters c;
 };
 
@@ -566,6 +571,7 @@ static void kf_init(mar_follow *f, double var_p, double var_r)
 
 void mar_follow_reset(mar_follow *f, double position)
 {
+    f->ticks_since_frame = f->unstepped = 0;
     f->silent_run = f->loud_run = 0;
     f->bad_since = f->quiet_since = 0;
     f->last_good = f->t;
@@ -592,6 +598,7 @@ void mar_follow_reset(mar_follow *f, double position)
         kf_init(f, 1e6, 1e-2);
         start_search(f, f->seg_start);
     }
+    f->last = (mar_follow_out){.position = f->p, .rate = f->r, .confidence = 0.0, .state = f->state};
 }
 
 /* --- correlation along a line ------------------------------------------ */
@@ -2002,7 +2009,52 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
     out->confidence = f->conf < 0.0 ? 0.0 : f->conf > 1.0 ? 1.0 : f->conf;
     out->state = f->state;
     out->flags = flags;
+    f->last = *out;
     f->t++;
+}
+
+#define MAX_CATCH_UP 50         /* steps without a frame in one tick, at most (after a long overrun) */
+
+size_t mar_follow_tick(mar_follow *f, const mar_follow_frame *frames, size_t n, int64_t elapsed,
+                       mar_follow_out *out)
+{
+    uint32_t flags = 0;
+    mar_follow_out step;
+    if (elapsed < 1)
+        elapsed = 1;
+    if (n > MAR_FOLLOW_TICK_FRAMES)
+        n = MAR_FOLLOW_TICK_FRAMES;
+    size_t used = 0;
+    for (size_t i = 0; i < n; i++) {
+        double live = frames[i].loudness, onset = frames[i].onset;
+        if (!isfinite(live) || live < 0.0 || !(isnan(onset) || (isfinite(onset) && onset >= 0.0))) {
+            flags |= MAR_FOLLOW_F_BAD_INPUT;        /* refused as a source would: no step */
+            f->c.bad_input++;
+            continue;
+        }
+        mar_follow_step_onset(f, live, onset, &step);
+        flags |= step.flags;
+        used++;
+    }
+    if (used > 0) {
+        f->ticks_since_frame = f->unstepped = 0;
+    } else {
+        f->ticks_since_frame += elapsed;
+        f->unstepped += elapsed;
+        if (f->ticks_since_frame > MAR_FOLLOW_FRAME_TIMEOUT) {     /* the source is silent: step without */
+            for (int64_t k = 0; k < f->unstepped && k < MAX_CATCH_UP; k++) {
+                mar_follow_step_onset(f, NAN, NAN, &step);
+                flags |= step.flags;
+            }
+            f->unstepped = 0;
+        }
+    }
+    *out = f->last;
+    out->position += out->rate * (double)f->unstepped;
+    if (out->position > (double)f->n)
+        out->position = (double)f->n;
+    out->flags = used ? flags : flags | MAR_FOLLOW_F_NO_FRAME;
+    return n;
 }
 
 void mar_follow_get_counters(const mar_follow *f, mar_follow_counters *c) { *c = f->c; }

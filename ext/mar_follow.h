@@ -108,6 +108,17 @@ typedef struct {
     uint64_t search_steps;      /* steps in which the search ran */
 } mar_follow_counters;
 
+/* A live frame as a source delivers it. */
+typedef struct {
+    double loudness;            /* linear [full scale] */
+    double onset;               /* onset strength [dB]; NaN: the source has none */
+} mar_follow_frame;
+
+/* mar_follow_tick: frames taken in one tick, at most; ticks without a frame
+ * before the follower steps without one (the source may deliver in blocks). */
+#define MAR_FOLLOW_TICK_FRAMES 8
+#define MAR_FOLLOW_FRAME_TIMEOUT 5
+
 typedef struct mar_follow mar_follow;
 
 /* Defaults that work for music at 20 ms ticks (see mar_follow.c). */
@@ -145,6 +156,21 @@ void mar_follow_step(mar_follow *f, double live, mar_follow_out *out);
 void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_out *out);
 
 void mar_follow_reset(mar_follow *f, double position);
+
+/* One tick of the show's clock, the way the engine and every offline tool
+ * drive the follower: the n live frames that came since the last tick (in
+ * order; only the first MAR_FOLLOW_TICK_FRAMES are used, the caller keeps
+ * the rest for the next tick) each make one step. Between frames the
+ * position runs on at the rate; after MAR_FOLLOW_FRAME_TIMEOUT ticks
+ * without a frame the follower steps without one for every tick since its
+ * last step (at most 50 in one tick), then once per tick. A frame with a
+ * negative or infinite loudness or onset is counted (bad_input), flagged
+ * and dropped. elapsed: periods since the last tick (1, more after an
+ * overrun). *out: the position at this tick, the flags of all its steps
+ * (MAR_FOLLOW_F_NO_FRAME when no frame came). Returns the number of frames
+ * taken from frames[] (used or dropped). */
+size_t mar_follow_tick(mar_follow *f, const mar_follow_frame *frames, size_t n, int64_t elapsed,
+                       mar_follow_out *out);
 
 void mar_follow_get_counters(const mar_follow *f, mar_follow_counters *c);
 size_t mar_follow_stored_length(const mar_follow *f);     /* [stored ticks] */

@@ -77,6 +77,11 @@ cdef extern from "mar_follow.h" nogil:
         uint64_t search_steps
     ctypedef struct mar_follow:
         pass
+    ctypedef struct mar_follow_frame:
+        double loudness
+        double onset
+    size_t mar_follow_tick(mar_follow *f, const mar_follow_frame *frames, size_t n, int64_t elapsed,
+                           mar_follow_out *out)
     void mar_follow_default_options(mar_follow_options *opt)
     mar_follow *mar_follow_create(const mar_follow_options *opt, const double *stored, size_t n_stored,
                                   int *status)
@@ -212,15 +217,19 @@ cdef class Follower:
             self.f = NULL
 
     def step(self, double live, double onset=NAN):
-        """One tick: (position [stored ticks], rate [stored ticks per tick],
-        confidence [0..1], state code, flags)."""
+        """One tick of the show's clock (mar_follow_tick) with one live frame,
+        or none when live is NaN: (position [stored ticks], rate [stored ticks
+        per tick], confidence [0..1], state code, flags)."""
         cdef mar_follow_out out
-        mar_follow_step_onset(self.f, live, onset, &out)
+        cdef mar_follow_frame frame
+        frame.loudness = live
+        frame.onset = onset
+        mar_follow_tick(self.f, &frame, 0 if live != live else 1, 1, &out)
         return out.position, out.rate, out.confidence, out.state, out.flags
 
     def run(self, live, onset=None, bint timing=False):
-        """Every frame of ``live`` (NaN: no frame that tick) through the C step,
-        without the GIL. Returns a dict of arrays: position, rate,
+        """One tick per entry of ``live`` (NaN: no frame that tick) through
+        mar_follow_tick, as the engine drives it, without the GIL. Returns a dict of arrays: position, rate,
         confidence, state (int8), flags (uint32), and with timing also ns
         (int64: wall time of each step [ns], CLOCK_MONOTONIC around it)."""
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] x = np.ascontiguousarray(live, dtype=np.float64)
@@ -240,12 +249,15 @@ cdef class Follower:
         cdef uint32_t[::1] fv = flags
         cdef int64_t[::1] tv = ns
         cdef mar_follow_out out
+        cdef mar_follow_frame frame
         cdef timespec t0, t1
         with nogil:
             for i in range(n):
                 if timing:
                     clock_gettime(CLOCK_MONOTONIC, &t0)
-                mar_follow_step_onset(self.f, x[i], ov[i], &out)
+                frame.loudness = x[i]
+                frame.onset = ov[i]
+                mar_follow_tick(self.f, &frame, 0 if x[i] != x[i] else 1, 1, &out)
                 if timing:
                     clock_gettime(CLOCK_MONOTONIC, &t1)
                     tv[i] = (t1.tv_sec - t0.tv_sec) * 1000000000 + (t1.tv_nsec - t0.tv_nsec)

@@ -19,6 +19,7 @@ from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
+from marionette.follow import sync_ticks
 from marionette.show import LIMIT_POLICIES, load_show
 
 BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync")
@@ -48,13 +49,13 @@ def _live_frames(args, config):
     if not args.music:
         return None
     from marionette.loudness import wav_frames
-    return list(zip(*wav_frames(args.music, config.tick_period)))
+    return wav_frames(args.music, config.tick_period)
 
 
 def _feed_in_real_time(engine, frames, period: float, stop: threading.Event) -> None:
     """Push one frame per period [s], as a sound card would."""
     start = time.monotonic()
-    for k, (value, onset) in enumerate(frames):
+    for k, (value, onset) in enumerate(zip(*frames)):
         if stop.wait(max(0.0, start + (k + 1) * period - time.monotonic())):
             return
         engine.push_loudness(float(value), float(onset))
@@ -90,10 +91,11 @@ def cmd_play(args) -> int:
                                      args=(engine, live, config.tick_period, stop_feed)).start()
                 engine.wait()
                 engine.stop()
-            elif live is not None:
+            elif live is not None:       # tick k has heard frame k - 1, as in sync-sim
+                loud, onset = (sync_ticks(x) for x in live)
                 for k in range(n):
-                    if k < len(live):
-                        engine.push_loudness(*live[k])
+                    if k < len(loud) and not np.isnan(loud[k]):
+                        engine.push_loudness(loud[k], onset[k])
                     engine.step(1)
             else:
                 engine.step(n)

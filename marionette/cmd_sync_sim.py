@@ -4,13 +4,16 @@
                         [--mode smooth|paper] [--truth TRUTH.csv] [--config FIGURE.toml]
                         [--loudness-only]
 
-The taught recording gives the stored loudness and onset strength (one
-frame each per tick, marionette/loudness.py), the live recording the live
+The taught recording (or a show file, whose stored loudness and onsets the
+engine follows) gives the stored loudness and onset strength (one frame
+each per tick, marionette/loudness.py), the live recording the live
 frames (--loudness-only: the live loudness alone, as servo nodes measure
 it; the tracker then works without onsets, as the engine does on node
-LOUDNESS frames); the C follower (the same code the engine
-runs) steps once per tick: tick k has heard the live audio up to k * T, so
-it gets live frame k - 1 (tick 0 gets none). TRACK.csv has one row per tick:
+LOUDNESS frames); the C follower runs its tick (mar_follow_tick, the same
+code the engine runs in its tick) once per tick: tick k has heard the live
+audio up to k * T, so it gets live frame k - 1 (tick 0 gets none), and
+`marionette play --music` feeds the engine the same way, so the two give
+the same track bit for bit. TRACK.csv has one row per tick:
 
     tick,time_s,position_s,rate,confidence,state
 
@@ -32,6 +35,7 @@ from marionette.config import FOLLOW_MODES, load_config
 from marionette.errors import MarionetteError
 from marionette.follow import STATES, Follower, sync_ticks
 from marionette.loudness import wav_frames, wav_loudness
+from marionette.show import load_show
 
 
 class SyncSimError(MarionetteError, ValueError):
@@ -84,12 +88,24 @@ def accuracy(errors_s: np.ndarray) -> dict:
             "median_ms": float(np.median(e) * 1e3), "p95_ms": float(np.quantile(e, 0.95) * 1e3)}
 
 
+def taught_frames(taught, period: float):
+    """The stored loudness and onsets [dB] (None when not stored) the
+    follower compares with: from a show file (.npz, .csv: what the engine
+    follows at the show) or from the taught recording (WAV)."""
+    if Path(taught).suffix in (".npz", ".csv"):
+        show = load_show(taught)
+        if abs(show.tick_period - period) > 1e-12:
+            raise SyncSimError(f"{taught}: tick period {show.tick_period} s, the figure's is {period} s")
+        return show.loudness, show.onsets
+    return wav_frames(taught, period)
+
+
 def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool = True):
     """Runs the follower over two recordings; returns (track, period [s], follower).
     live_onsets False: the live frames carry no onset (a node's LOUDNESS)."""
     period = config.tick_period if config is not None else 0.020
     settings = config.follow if config is not None else None
-    stored, stored_onsets = wav_frames(taught, period)
+    stored, stored_onsets = taught_frames(taught, period)
     if live_onsets:
         frames, onsets = wav_frames(live, period)
     else:                       # as a node measures it: no onset is computed
@@ -150,7 +166,9 @@ def run(args) -> int:
 
 def register(sub) -> None:
     p = sub.add_parser("sync-sim", help="follow a live recording against a taught one, offline")
-    p.add_argument("--taught", required=True, help="the music as taught (WAV)")
+    p.add_argument("--taught", required=True,
+                   help="the music as taught (WAV), or a show (.npz, .csv) whose stored loudness "
+                        "the engine would follow")
     p.add_argument("--live", required=True, help="the music as played at the show (WAV)")
     p.add_argument("--out", required=True, help="track to write (CSV, one row per tick)")
     p.add_argument("--mode", choices=FOLLOW_MODES, default="smooth",

@@ -124,8 +124,10 @@ class Follower:
         return self._f.stored_length
 
     def step(self, live: float = float("nan"), onset: float = float("nan")) -> FollowOut:
-        """One tick with the newest live frame (linear loudness, and its onset
-        strength [dB] when made with onsets; NaN: none came)."""
+        """One tick of the show's clock, as the engine runs it
+        (mar_follow_tick), with the live frame that came in it (linear
+        loudness, and its onset strength [dB] when made with onsets; NaN:
+        none came)."""
         p, r, c, s, fl = self._f.step(float(live), float(onset))
         return FollowOut(position=p, rate=r, confidence=c, state=STATES[s], flags=fl)
 

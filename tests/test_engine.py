@@ -180,7 +180,7 @@ def test_bad_inputs_are_refused_and_recorded():
         r = engine.records()
         assert engine.stats()["bad_input"] == 3
     assert r["flags"][0] & FLAG_BAD_INPUT and not r["flags"][1] & FLAG_BAD_INPUT
-    np.testing.assert_array_equal(r["live_loudness"], 0.3)
+    np.testing.assert_array_equal(r["live_loudness"], [0.3, np.nan, np.nan])   # NaN: no new frame
     with pytest.raises(ShowError):
         Engine(config, make_show(config, np.full((2, 10), 5.0)))    # outside the limits
     with pytest.raises(ValueError, match="lead"):

@@ -117,11 +117,14 @@ static void test_bad_inputs(void)
     CHECK(mar_engine_push_frame(e, 0.4, INFINITY) < 0, "infinite onset accepted");
     CHECK(mar_engine_push_frame(e, 0.4, 2.0) == 0, "good frame refused");
     CHECK(mar_engine_push_loudness(e, 0.5) == 0, "good loudness refused");
-    mar_engine_step(e, 3);
+    mar_engine_step(e, 1);
     mar_record r;
     double cmd;
     CHECK(mar_engine_snapshot(e, &r, &cmd) == 0, "snapshot");
-    CHECK(r.live_loudness == 0.5, "live loudness %g", r.live_loudness);
+    CHECK(r.live_loudness == 0.5, "live loudness %g", r.live_loudness);    /* the newest frame */
+    mar_engine_step(e, 2);
+    CHECK(mar_engine_snapshot(e, &r, &cmd) == 0, "snapshot");
+    CHECK(isnan(r.live_loudness), "live loudness %g on a tick without a frame", r.live_loudness);
     mar_counters cnt;
     mar_engine_counters(e, &cnt);
     CHECK(cnt.bad_input == 6, "bad inputs counted %llu", (unsigned long long)cnt.bad_input);

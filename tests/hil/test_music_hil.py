@@ -34,7 +34,11 @@ def test_follows_music_measured_by_a_node(sim, figure, tmp_path):
     link.close()
     s.quit()
     t0 = float(np.load(trace)["t0"])
-    assert np.all(np.isfinite(records["live_loudness"][10:]))      # frames came in
+    # frames came in: live_loudness is NaN on a tick without a new frame, and
+    # a node's answer may come a tick late (then two come in the next)
+    fresh = np.isfinite(records["live_loudness"][10:])
+    assert np.mean(fresh) >= 0.8, np.mean(fresh)
+    assert not np.any(np.convolve(~fresh, np.ones(5), "valid") == 5)    # never 5 ticks without
     # where the music is at each tick: it started with the simulator's clock
     truth = (records["time_ns"] * 1e-9 - t0) / figure.tick_period     # [ticks]
     locked = records["follow_state"] == 1

@@ -1,0 +1,79 @@
+"""One follower path: `marionette play --music` (the engine's tick) and
+`marionette sync-sim` (mar_follow_tick offline) give the same track, bit for
+bit, for the same show and the same live recording."""
+import numpy as np
+import pytest
+
+from conftest import run_cli
+from marionette.bench.music import synthesize
+from marionette.bench.tape import Deck, play
+from marionette.cmd_sync_sim import simulate
+from marionette.config import load_config
+from marionette.loudness import read_wav, wav_frames, write_wav
+from marionette.recorder import read_flight_record
+from marionette.show import Show
+from marionette.teach.make_sample import sample_path
+
+T = 0.020
+
+
+def show_for(config, wav, tmp_path):
+    """A show for the bundled figure that stores the music's loudness and onsets."""
+    loud, onset = wav_frames(wav, T)
+    home = np.array([[a.home for a in config.axes]]).T
+    show = Show(axis_names=config.axis_names, units=[a.unit for a in config.axes],
+                positions=np.repeat(home, len(loud), axis=1), loudness=loud, onsets=onset,
+                tick_period=T)
+    path = tmp_path / "show.npz"
+    show.save(path)
+    return path
+
+
+def tape(samples, rate, deck, path):
+    played = play(samples, rate, deck)
+    write_wav(path, played.samples / max(1e-9, np.max(np.abs(played.samples))) * 0.5,
+              int(played.sample_rate))
+    return path
+
+
+def assert_same_track(show, live, tmp_path):
+    record = tmp_path / "flight.bin"
+    result = run_cli("play", show, "--music", live, "--record", record)
+    assert result.returncode == 0, result.stderr
+    _, rec = read_flight_record(record)
+    track, _, _ = simulate(show, live, config=load_config(None))
+    n = len(rec)
+    last = n - 1                                    # the engine holds at the show's last tick
+    m = min(n, len(track.position))
+    np.testing.assert_array_equal(rec["position"][:m], np.minimum(track.position[:m], last))
+    np.testing.assert_array_equal(rec["rate"][:m], track.rate[:m])
+    np.testing.assert_array_equal(rec["follow_state"][:m], track.state[:m])
+    np.testing.assert_array_equal(rec["follow_confidence"][:m], track.confidence[:m])
+    return track
+
+
+@pytest.mark.parametrize("speed", [0.97, 0.99, 1.0, 1.01, 1.03])
+def test_play_and_sync_sim_agree_on_the_bundled_sample(speed, tmp_path):
+    config = load_config(None)
+    music = sample_path("music.wav")
+    show = show_for(config, music, tmp_path)
+    samples, rate = read_wav(music)
+    live = tape(samples, rate, Deck(speed=speed, snr_db=20.0, sample_rate=rate, seed=7),
+                tmp_path / "live.wav")
+    assert_same_track(show, live, tmp_path)
+
+
+def test_play_and_sync_sim_agree_on_random_decks(tmp_path):
+    config = load_config(None)
+    rng = np.random.default_rng(2026)
+    for case in range(4):
+        style = ["pop", "waltz", "techno", "ambient"][case]
+        piece = synthesize(style, seed=int(rng.integers(1, 1000)))
+        taught = tmp_path / f"taught{case}.wav"
+        write_wav(taught, piece.samples, int(piece.sample_rate))
+        show = show_for(config, taught, tmp_path)
+        deck = Deck(speed=rng.uniform(0.95, 1.05), wow=0.002, snr_db=rng.uniform(15, 30),
+                    start=rng.uniform(0, 30), pauses=((rng.uniform(5, 10), rng.uniform(1, 3)),),
+                    seconds=20.0, sample_rate=11025, seed=case)
+        live = tape(piece.samples, piece.sample_rate, deck, tmp_path / f"live{case}.wav")
+        assert_same_track(show, live, tmp_path)
