@@ -210,12 +210,14 @@ def _render_event(c: _Canvas, start: float, kind: str, pitch: float, dur: float,
 
 
 def synthesize(style: str, seed: int = 1, sample_rate: float = SAMPLE_RATE,
-               repeat: int = 1) -> Piece:
+               repeat: int = 1, form: tuple | None = None) -> Piece:
     """Render a piece of the given style; repeat > 1 plays the form that many
-    times (for longer pieces; later rounds vary like any repeat)."""
+    times (for longer pieces; later rounds vary like any repeat). form, as an
+    entry of FORMS (tempo [bpm], beats per bar, sections), replaces the
+    style's own form: the style's notes in another order and length."""
     if style not in FORMS:
         raise ValueError(f"unknown style {style!r} (known: {', '.join(STYLES)})")
-    bpm, per_bar, form = FORMS[style]
+    bpm, per_bar, form = FORMS[style] if form is None else form
     form = form * repeat
     beat_s = 60.0 / bpm                                         # [s]
     total_beats = sum(bars for _, bars, _, _ in form) * per_bar

@@ -7,13 +7,21 @@ writes, deterministically (fixed seed, numpy's PCG64):
 
 * ``markers.csv``   - 26 markers on a calibration rig of 9 poles, seen by both cameras
   (0.3 px noise, reported to 0.01 px);
-* ``recording.csv`` - 12 s of LED detections of a known dance
+* ``recording.csv`` - LED detections of a known dance, as long as the music (45 s)
   (:mod:`marionette.teach.synthetic`: 0.5 px noise, integer pixels, dropouts, shading);
-* ``music.wav``     - 12 s of synthesized music, 8 kHz mono 16-bit: a pentatonic tune at
-  120 beats per minute over a bass, growing louder to an accent at every fourth beat.
+* ``music.wav``     - 45 s of a song from the project's synthesizer
+  (:mod:`marionette.bench.music`, pop style: drums, bass, chords, a melody), 8 kHz mono
+  16-bit: 120 beats per minute, intro, verse, chorus, break, verse, chorus, outro. The
+  verse and the chorus come back once (the same notes with a repeat's small
+  differences); nothing else repeats: the loudness level correlates at most 0.40
+  with itself 0.5 to 10 s later (a tune that loops one 2 s bar reads 0.99 at 2 s),
+  so the music follower can tell where in the song the live music is.
 
 The dance stays inside the bundled figure's reach after the working-area compression
-(yaw within +-1.6 rad, tilts within 5 deg), so the show plays on it unchanged.
+(yaw within +-1.6 rad, tilts within 5 deg) for any length: it is a sum of sinusoids
+whose amplitudes add up to less than that. It swells in over the first 2 s and dies
+away over the last 2 s (FadedDance), so it starts and ends at rest and the show's
+last move can stop in time. The show plays on the figure unchanged.
 """
 from __future__ import annotations
 
@@ -24,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from marionette.bench.music import Piece, synthesize
 from marionette.loudness import write_wav
 from marionette.teach.camera import CameraParams, camera_coordinates, project
 from marionette.teach.markers import CameraMarkers, write_markers
@@ -33,10 +42,15 @@ from marionette.teach.synthetic import (IMAGE_SIZE, Dance, SyntheticRecording, d
 
 SAMPLE_DIR = Path(__file__).resolve().parent.parent / "data" / "sample"
 SEED = 1996
-DURATION = 12.0          # [s]
 SAMPLE_RATE = 8000       # music [Hz]
-BEAT = 0.5               # [s], 120 beats per minute
 RUCKSACK_HALF_SIDE = 0.2 # b [m], as in the bundled teach settings
+FADE = 2.0               # [s] the dance swells in and dies away over this at either end
+# The song, in the synthesizer's form notation: tempo [beats per minute], beats per bar,
+# and (section, bars, level [dB], crescendo over the section [dB]); equal names play
+# the same notes. 22 bars of 2 s and 1 s for the last notes to ring out: 45 s.
+SONG_FORM = (120.0, 4, [("intro", 2, -12, 6), ("verse", 4, -6, 0), ("chorus", 4, 0, 0),
+                        ("break", 2, -20, 0), ("verse", 4, -6, 0), ("chorus", 4, 0, 0),
+                        ("outro", 2, -4, -14)])
 
 
 def sample_path(name: str) -> Path:
@@ -44,8 +58,38 @@ def sample_path(name: str) -> Path:
     return SAMPLE_DIR / name
 
 
-def sample_dance(rng: np.random.Generator) -> Dance:
-    """A dance of two sinusoids per coordinate with random phases.
+@dataclass
+class FadedDance(Dance):
+    """A Dance whose sinusoids are scaled by an envelope: from 0 to 1 over the first
+    ``fade`` [s], 1, and back to 0 over the last ``fade`` before ``end`` [s] (raised
+    cosines). The dancer starts and ends at rest at the offset, so the show's last
+    move has time to stop."""
+
+    end: float = 0.0                        # [s]
+    fade: float = FADE                      # [s]
+
+    def envelope(self, t) -> tuple[np.ndarray, np.ndarray]:
+        """The envelope g(t) [1] and its time derivative [1/s] at times t (K,) [s]."""
+        u = np.clip(np.minimum(t, self.end - t) / self.fade, 0.0, 1.0)   # 0 at an end, 1 inside
+        du = np.where(t < self.end - t, 1.0, -1.0) / self.fade            # [1/s] where not clipped
+        g = 0.5 * (1.0 - np.cos(np.pi * u))
+        return g, 0.5 * np.pi * np.sin(np.pi * u) * du                    # sin is 0 where clipped
+
+    def pose(self, t) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t, float))
+        steady = self.offset + self.rate * t[:, None]
+        return steady + self.envelope(t)[0][:, None] * (super().pose(t) - steady)
+
+    def velocity(self, t) -> np.ndarray:
+        t = np.atleast_1d(np.asarray(t, float))
+        g, dg = self.envelope(t)
+        swing = super().pose(t) - self.offset - self.rate * t[:, None]   # the sinusoids alone
+        return self.rate + g[:, None] * (super().velocity(t) - self.rate) + dg[:, None] * swing
+
+
+def sample_dance(rng: np.random.Generator, duration: float) -> FadedDance:
+    """A dance of duration [s], two sinusoids per coordinate with random phases,
+    faded in and out (FadedDance).
 
     x0, y0 within +-1.6 m (of the 4 m x 4 m area), z0 1.3 m +- 0.12 m, roll and pitch
     within +-5 deg, yaw within +-1.6 rad; frequencies 0.1-0.7 Hz.
@@ -64,7 +108,7 @@ def sample_dance(rng: np.random.Generator) -> Dance:
                           [0.10, 0.35]])      # [Hz]
     phase = rng.uniform(0.0, 2.0 * np.pi, (6, 2))
     offset = np.array([0.0, 0.0, 1.3, 0.0, 0.0, 0.0])
-    return Dance(offset, np.zeros(6), amplitude, frequency, phase)
+    return FadedDance(offset, np.zeros(6), amplitude, frequency, phase, end=duration)
 
 
 def rig_markers() -> tuple[list[str], np.ndarray]:
@@ -94,25 +138,9 @@ def observe_markers(cameras: list[CameraParams], rng: np.random.Generator,
     return out
 
 
-def synth_music(rng: np.random.Generator, duration: float = DURATION,
-                rate: int = SAMPLE_RATE) -> np.ndarray:
-    """Samples in [-1, 1]: tune + bass; loudness rises through each bar of four beats."""
-    t = np.arange(int(round(duration * rate))) / rate
-    x = np.zeros_like(t)
-    scale = 440.0 * 2.0 ** (np.array([0, 3, 5, 7, 10, 12]) / 12.0)   # A minor pentatonic [Hz]
-    n_beats = int(round(duration / BEAT))
-    for k in range(n_beats):
-        start = k * BEAT
-        tau = t - start
-        on = (tau >= 0) & (tau < 2 * BEAT)
-        level = 0.25 + 0.25 * (k % 4) / 3.0 + (0.3 if k % 4 == 3 else 0.0)   # accent [1]
-        f = scale[rng.integers(scale.size)]
-        env = np.exp(-tau[on] / 0.25) * np.minimum(1.0, tau[on] / 0.01)
-        note = sum(np.sin(2 * np.pi * h * f * tau[on]) / h for h in (1, 2, 3))
-        x[on] += level * env * note
-        bass = 110.0 if (k // 4) % 2 == 0 else 82.41                     # A2, E2 [Hz]
-        x[on] += 0.3 * level * np.exp(-tau[on] / 0.4) * np.sin(2 * np.pi * bass * tau[on])
-    return 0.8 * x / np.max(np.abs(x))
+def sample_music(seed: int = SEED) -> Piece:
+    """The sample's song: samples [-1, 1] at SAMPLE_RATE [Hz] and its sections [s]."""
+    return synthesize("pop", seed, SAMPLE_RATE, form=SONG_FORM)
 
 
 @dataclass
@@ -125,17 +153,25 @@ class Sample:
     sample_rate: int             # [Hz]
 
 
-def write_sample(directory, seed: int = SEED, duration: float = DURATION,
+def write_sample(directory, seed: int = SEED, duration: float | None = None,
                  cameras: list[CameraParams] | None = None) -> Sample:
-    """Write markers.csv, recording.csv and music.wav into ``directory``."""
+    """Write markers.csv, recording.csv and music.wav into ``directory``.
+
+    duration [s]: of the recording and the music; None: the whole song (45 s); a
+    shorter one cuts the song (the tests teach a few seconds of it)."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
+    song = sample_music(seed)
+    if duration is None:
+        duration = song.duration
+    elif not 0.0 < duration <= song.duration:
+        raise ValueError(f"duration {duration!r} s: the sample's song lasts {song.duration:g} s")
+    music = song.samples[:int(round(duration * SAMPLE_RATE))]
     rng = np.random.default_rng(seed)
     cameras = default_cameras() if cameras is None else cameras
-    dance = sample_dance(rng)
+    dance = sample_dance(rng, duration)
     syn = synthetic_recording(seed, duration, cameras=cameras, b=RUCKSACK_HALF_SIDE, dance=dance)
     markers = observe_markers(cameras, rng)
-    music = synth_music(rng, duration)
     note = (f"sample made by `python -m marionette.teach.make_sample` (seed {seed}); "
             "units: x, y, z [m], R, T [pixel]")
     write_markers(directory / "markers.csv", markers, comment=note)
@@ -150,7 +186,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("directory", nargs="?", default=str(SAMPLE_DIR),
                         help=f"where to write (default: {SAMPLE_DIR})")
     parser.add_argument("--seed", type=int, default=SEED)
-    parser.add_argument("--duration", type=float, default=DURATION, help="[s]")
+    parser.add_argument("--duration", type=float, default=None,
+                        help="[s] of recording and music (default: the whole song)")
     args = parser.parse_args(argv)
     write_sample(args.directory, args.seed, args.duration)
     for name in ("markers.csv", "recording.csv", "music.wav"):
