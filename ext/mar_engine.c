@@ -155,6 +155,11 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
         return NULL;
     }
     e->rate = 1.0;
+    if (e->follow) {            /* the show waits at the cue for the music */
+        mar_follow_cue(e->follow, opt->follow_cue);
+        if (isfinite(opt->follow_cue))
+            e->position = fmin(fmax(opt->follow_cue, 0.0), (double)(n_ticks - 1));
+    }
     e->mode = opt->start_holding ? MAR_MODE_HOLD : MAR_MODE_SHOW;
     atomic_init(&e->rate_request, 1.0);
     atomic_init(&e->seek_request, 0.0);

@@ -43,6 +43,7 @@ typedef struct {
     int start_holding;          /* 1: start holding the start pose (mode HOLD), 0: playing the show */
     int follow;                 /* 1: the live music's follower drives position and rate (mar_follow.h) */
     mar_follow_options follow_opt;  /* used when follow is 1 */
+    double follow_cue;          /* where the live music starts [show ticks] (mar_follow_cue); NaN: unknown */
 } mar_engine_options;
 
 /* Who drives the commands. */

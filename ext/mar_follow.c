@@ -149,6 +149,18 @@
 #define LONG_HOLD 50            /* a hold this long without a measurement leaves the place unproven [ticks] ... */
 #define PROOF_CONF 0.5          /* ... until the confidence is back to this [1] */
 #define SEARCH_GAP 50           /* steady hiss this long while searching: the tape stood still [ticks] */
+#define LEADER_FRAMES 10        /* a cue's leader: steady frames before the music (0.2 s) [ticks] ... */
+#define LEADER_WAIT 25          /* ... none by this many frames: the music played from the first [ticks] */
+#define LEADER_CHECKS 20        /* ... or music, if it fits the cue at a multiple of LEADER_WAIT, up to this [1] */
+#define RISE_DB 6.0             /* the music starts: a frame this far over the leader [dB] ... */
+#define RISE_START_DB 1.0       /* ... its rise began at the first frame this far over it [dB] */
+#define CUE_FITS 3              /* joint fits of rate and offset on lines through the cue, after ... */
+static const size_t CUE_FIT_AT[CUE_FITS] = {25, 50, 100};   /* ... this much music [ticks] */
+#define CUE_RATE_SPAN 0.07      /* rates 1 +- this [stored ticks per tick] ... */
+#define CUE_RATE_STEP 0.0025    /* ... in these steps */
+#define CUE_LAGS 5              /* offsets from the line through the cue, either way [ticks] */
+#define CUE_LOCK 0.8            /* a fit this good, and sharp, locks the cue [1] ... */
+#define CUE_PRIOR 0.5           /* ... if it leads every other place by this times a search lock's lead [1] */
 
 typedef struct {
     double p;                   /* position at step t [stored ticks] */
@@ -268,6 +280,16 @@ struct mar_follow {
     /* scratch for resampling */
     size_t scap;
     double *rs;                 /* resampled live values */
+
+    /* the cue (mar_follow_cue) */
+    double cue_from;            /* the first audible stored frame at or after the cue [stored ticks] */
+    int cue_pending;            /* cued, the music started, no fit has locked yet: never LOCKED by tracking */
+    uint64_t cue_onset;         /* step of the music's first frame */
+    int cue_fits;               /* joint fits done */
+    uint64_t wait_frames;       /* WAITING: frames heard */
+    uint64_t leader;            /* ... frames of the steady leader (the run within STEADY_RANGE_DB) */
+    double lead_lo, lead_hi;    /* ... its level range [dB] */
+    uint64_t rise_step;         /* ... first frame of a rise over it, 0: none */
 
     /* mar_follow_tick: the clock between frames */
     mar_follow_out last;        /* the last step's answer */
@@ -572,6 +594,7 @@ static void kf_init(mar_follow *f, double var_p, double var_r)
 void mar_follow_reset(mar_follow *f, double position)
 {
     f->ticks_since_frame = f->unstepped = 0;
+    f->cue_pending = 0;
     f->silent_run = f->loud_run = 0;
     f->bad_since = f->quiet_since = 0;
     f->last_good = f->t;
@@ -599,6 +622,21 @@ void mar_follow_reset(mar_follow *f, double position)
         start_search(f, f->seg_start);
     }
     f->last = (mar_follow_out){.position = f->p, .rate = f->r, .confidence = 0.0, .state = f->state};
+}
+
+void mar_follow_cue(mar_follow *f, double position)
+{
+    mar_follow_reset(f, position);
+    if (!isfinite(position))
+        return;
+    size_t j = (size_t)f->p;                /* the first audible stored frame from the cue on */
+    while (j + 1 < f->n && f->sdb[j] < f->s_level - MUSIC_RANGE_DB)
+        j++;
+    f->cue_from = f->p > (double)j ? f->p : (double)j;
+    f->state = MAR_FOLLOW_WAITING;
+    f->r = 0.0;
+    f->wait_frames = f->leader = f->rise_step = 0;
+    f->last = (mar_follow_out){.position = f->p, .rate = 0.0, .confidence = 0.0, .state = f->state};
 }
 
 /* --- correlation along a line ------------------------------------------ */
@@ -1474,7 +1512,7 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->silent_run = 0;
     f->conf = (e->fine - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->measured = 0;
-    f->doubt = f->probation = f->regaining = f->unproven = 0;
+    f->doubt = f->probation = f->regaining = f->unproven = f->cue_pending = 0;
     f->h_slow = f->h_fast = e->fine;
     f->have_gain = 0;
     update_gain(f, f->p, f->r, f->opt.verify_window);
@@ -1483,6 +1521,159 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->c.locks++;
     f->near = 0;
     stop_search(f);
+}
+
+static double line_fit(mar_follow *f, size_t ages, double *best_r, double *best_d, double *best_kappa);
+
+/* WAITING at the cue: has the music started? Before it, the input is a
+ * steady leader (hiss, a room, digital silence: frames within
+ * STEADY_RANGE_DB of each other); the music is a frame RISE_DB over it, and
+ * it began at the first frame of that rise. No leader within LEADER_WAIT
+ * frames: the music played from the first frame. Returns the onset's step
+ * and 1 when the music started. */
+static int music_started(mar_follow *f, int have, uint64_t *onset)
+{
+    if (!have)
+        return 0;
+    double db = f->ldb[ring(f, f->t)];
+    uint64_t heard = ++f->wait_frames;
+    if (f->leader < LEADER_FRAMES) {                    /* the leader forming */
+        double lo = f->leader ? fmin(f->lead_lo, db) : db, hi = f->leader ? fmax(f->lead_hi, db) : db;
+        if (f->leader && hi - lo > STEADY_RANGE_DB)
+            f->leader = 0, lo = hi = db;                /* not steady: start again here */
+        f->leader++, f->lead_lo = lo, f->lead_hi = hi;
+        if (f->leader < LEADER_FRAMES && heard >= LEADER_WAIT) {
+            *onset = f->t + 1 - heard;                  /* no leader: music from the first frame */
+            return 1;
+        }
+        return 0;
+    }
+    if (heard % LEADER_WAIT == 0 && heard <= LEADER_CHECKS * LEADER_WAIT) {
+        /* a steady start may be the music itself (a held chord): it is, if
+         * the frames since the first fit the stored music from the cue */
+        double r, d, kappa;
+        if (line_fit(f, (size_t)heard, &r, &d, &kappa) >= CUE_LOCK) {
+            *onset = f->t + 1 - heard;
+            return 1;
+        }
+    }
+    if (db <= f->lead_hi + RISE_START_DB) {             /* still the leader */
+        f->rise_step = 0;
+        if (db >= f->lead_hi - STEADY_RANGE_DB)
+            f->lead_lo = fmin(f->lead_lo, db), f->lead_hi = fmax(f->lead_lo + STEADY_RANGE_DB, f->lead_hi);
+        return 0;
+    }
+    if (!f->rise_step)
+        f->rise_step = f->t;
+    if (db < f->lead_hi + RISE_DB)
+        return 0;
+    *onset = f->rise_step;
+    return 1;
+}
+
+/* The music started at step `onset`: play from the cue at rate 1. */
+static void play_from_cue(mar_follow *f, uint64_t onset)
+{
+    f->cue_onset = f->seg_start = f->search_from = onset;
+    f->p = f->cue_from + (double)(f->t - onset) + 0.5;     /* its middle, on average */
+    f->r = 1.0;
+    kf_init(f, 1.0, 1e-3);
+    f->state = MAR_FOLLOW_HOLDING;
+    f->ever = 1;
+    f->cue_pending = 1;
+    f->cue_fits = 0;
+    f->measured = 0;
+    f->last_good = f->t;
+    f->bad_since = f->quiet_since = 0;
+}
+
+/* The rate and offset of the line through the cue (the music's first
+ * frame `ages` frames ago) that fit the live frames since best: returns its
+ * correlation at the whole lag (as cue_rival scores), -1 if none fits, NaN
+ * if the live frames are too flat to tell (no evidence either way). */
+static double line_fit(mar_follow *f, size_t ages, double *best_r, double *best_d, double *best_kappa)
+{
+    double best = NAN;                                          /* no evidence yet */
+    *best_r = 1.0, *best_d = *best_kappa = 0.0;
+    int steps = (int)(CUE_RATE_SPAN / CUE_RATE_STEP + 0.5);
+    for (int i = -steps; i <= steps; i++) {
+        double r = 1.0 + CUE_RATE_STEP * (double)i;
+        double p = f->cue_from + r * ((double)ages - 0.5);     /* the line through the cue, now */
+        long j0;
+        double c, rho[2 * CUE_LAGS + 1], h, kappa;
+        int edge;
+        size_t m = resample(f, p, r, ages, &j0, &c);
+        if (m < ages / 2)
+            continue;
+        if (correlate(f, f->rs, 0, m, j0, CUE_LAGS, rho) < f->opt.quiet_db)
+            continue;                                           /* flat: no evidence */
+        double d = peak(rho, CUE_LAGS, &h, &kappa, &edge);
+        if (isnan(best))
+            best = -1.0;                                        /* evidence, no fit yet */
+        if (!edge && h > best)
+            best = rho[(int)lround(d) + CUE_LAGS], *best_r = r, *best_d = d, *best_kappa = kappa;
+    }
+    return best;
+}
+
+/* The best correlation of the live frames resampled along a line (rs[0 ..
+ * m), stored frames j0 ..) anywhere in the stored piece at least DISTINCT
+ * from offset d [ticks] of that line: the cue's rival. Costs n m. */
+static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
+{
+    double rho[2 * MAX_LAGS + 1], best = -1.0;
+    for (long c = -j0 + MAX_LAGS; c - MAX_LAGS <= (long)f->n - j0 - (long)m; c += 2 * MAX_LAGS + 1) {
+        correlate(f, f->rs, 0, m, j0 + c, MAX_LAGS, rho);
+        for (int i = 0; i <= 2 * MAX_LAGS; i++) {
+            long off = c + i - MAX_LAGS;
+            if (fabs((double)off - d) > DISTINCT && rho[i] > best)
+                best = rho[i];
+        }
+    }
+    return best;
+}
+
+/* After CUE_FIT_AT frames of music: the rate and offset on lines through
+ * the cue that fit the live music best. The first clear fit locks; none
+ * that reaches track_threshold by the last refutes the cue: the whole-piece
+ * search takes over (the position runs on meanwhile). */
+static void cue_fit(mar_follow *f, uint32_t *flags)
+{
+    size_t ages = (size_t)(f->t + 1 - f->cue_onset);
+    if (ages != CUE_FIT_AT[f->cue_fits])
+        return;
+    f->cue_fits++;
+    double best_r, best_d, best_kappa;
+    double best = line_fit(f, ages, &best_r, &best_d, &best_kappa);
+    double rival = -1.0;
+    if (best >= CUE_LOCK && lockable_peak(f, best, best_kappa)) {
+        long j0;
+        double c;
+        size_t m = resample(f, f->cue_from + best_r * ((double)ages - 0.5), best_r, ages, &j0, &c);
+        rival = m ? cue_rival(f, m, j0, best_d) : 1.0;
+    }
+    double lead = fisher(best) - fisher(rival);
+    if (best >= CUE_LOCK && lockable_peak(f, best, best_kappa) && lead >= CUE_PRIOR * lock_lead(f, ages)) {
+        f->p = f->cue_from + best_r * ((double)ages - 0.5) + best_d;
+        f->r = best_r;
+        double rate_sd = 1.0 / (double)ages;                    /* a tick over the fit [1] */
+        kf_init(f, 0.25, rate_sd * rate_sd);
+        f->cue_pending = 0;
+        f->measured = 1;
+        f->state = MAR_FOLLOW_LOCKED;
+        f->last_good = f->t;
+        f->bad_since = 0;
+        f->conf = (best - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
+        f->h_slow = f->h_fast = best;
+        f->c.locks++;
+        *flags |= MAR_FOLLOW_F_MEASURED;
+    } else if (f->cue_fits == CUE_FITS && best < f->opt.track_threshold) {   /* NaN: flat, not refuted */
+        f->cue_pending = 0;                                     /* refuted */
+        f->state = MAR_FOLLOW_SEARCHING;
+        f->doubt = f->probation = f->regaining = 0;
+        stop_search(f);
+        start_search(f, f->cue_onset);
+    }
 }
 
 /* Start the near search around `centre` now [stored ticks], moving at
@@ -1906,7 +2097,7 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         f->probation = 0;
     /* LOCKED: a measurement confirmed the place since the last (re)start, recently */
     f->state = since <= f->opt.hold_after && f->measured && !f->doubt && !f->probation && !f->regaining
-        && !f->unproven ? MAR_FOLLOW_LOCKED : MAR_FOLLOW_HOLDING;
+        && !f->unproven && !f->cue_pending ? MAR_FOLLOW_LOCKED : MAR_FOLLOW_HOLDING;
     /* frames from well before the measurements went bad may belong to
      * another place of the tape (a jump): the search starts after them */
     uint64_t bad_start = f->t + 1 - f->bad_since;
@@ -1923,8 +2114,8 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         start_search(f, from);
         if (!f->regaining)
             f->regaining = 1, f->regain_ok = 0, f->regain_bad = f->bad_since;
-    } else if (f->probation) {
-        start_search(f, f->seg_start);
+    } else if (f->probation || (f->cue_pending && f->cue_fits == CUE_FITS)) {
+        start_search(f, f->seg_start);      /* an unproven place: the search decides */
     } else if (ok && f->searching && !f->doubt && !f->regaining) {
         stop_search(f);
     }
@@ -1944,7 +2135,11 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
 
     /* 1. the clock: where the music is now, before this frame is looked at */
     int resumed = 0;
-    if (f->state == MAR_FOLLOW_PAUSED)
+    uint64_t music_from;
+    if (f->state == MAR_FOLLOW_WAITING) {
+        if (music_started(f, have, &music_from))
+            play_from_cue(f, music_from);
+    } else if (f->state == MAR_FOLLOW_PAUSED)
         resumed = resume_now(f, have, &flags);
     else if (f->state == MAR_FOLLOW_SEARCHING)
         f->p += f->ever ? f->r : 0.0;                 /* flywheel, or nothing known yet */
@@ -1970,6 +2165,8 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
         }
         else if (!resumed || f->opt.mode == MAR_FOLLOW_SMOOTH)
             follow(f, have, &flags);
+        if (f->cue_pending && f->cue_fits < CUE_FITS && f->state != MAR_FOLLOW_PAUSED)
+            cue_fit(f, &flags);
     }
 
     /* 3. the searches, when not locked or in doubt */
@@ -1988,7 +2185,8 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
     }
 
     /* 4. limits */
-    if (f->opt.mode == MAR_FOLLOW_SMOOTH && f->state != MAR_FOLLOW_PAUSED && f->ever) {
+    int still = f->state == MAR_FOLLOW_PAUSED || f->state == MAR_FOLLOW_WAITING;
+    if (f->opt.mode == MAR_FOLLOW_SMOOTH && !still && f->ever) {
         if (f->r < f->opt.rate_min)
             f->r = f->opt.rate_min, flags |= MAR_FOLLOW_F_RATE_LIMIT;
         if (f->r > f->opt.rate_max)
@@ -2002,7 +2200,7 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
     }
     f->lpos[ring(f, f->t)] = f->p;
 
-    double rate = f->state == MAR_FOLLOW_PAUSED ? 0.0 : f->r;
+    double rate = still ? 0.0 : f->r;
     double ahead = f->p + rate * f->opt.delay;
     out->position = ahead > (double)f->n ? (double)f->n : ahead;
     out->rate = rate;

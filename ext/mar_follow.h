@@ -46,6 +46,7 @@ enum mar_follow_state {
     MAR_FOLLOW_LOCKED = 1,          /* following: recent measurements agree */
     MAR_FOLLOW_HOLDING = 2,         /* flywheel: quiet or unclear music, position runs on at the rate */
     MAR_FOLLOW_PAUSED = 3,          /* the recorder stopped: rate 0, position held */
+    MAR_FOLLOW_WAITING = 4,         /* at the cue, before the music starts: rate 0 (mar_follow_cue) */
 };
 
 /* Flags in mar_follow_out.flags. */
@@ -156,6 +157,18 @@ void mar_follow_step(mar_follow *f, double live, mar_follow_out *out);
 void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_out *out);
 
 void mar_follow_reset(mar_follow *f, double position);
+
+/* The show starts from a cue: the live music will start at `position`
+ * [stored ticks] (0: the top). The follower WAITS there (rate 0) through
+ * the silence before the music; at the music's onset (a rise out of a
+ * steady leader, or music from the first frame) it plays from the first
+ * audible stored frame at or after the cue at rate 1 (HOLDING), fits rate
+ * and offset jointly on lines through the cue after 0.5, 1 and 2 s of
+ * music, and LOCKS at the first clear fit. No other LOCKED comes from the
+ * cue: a cue the music refutes (no fit after 2 s, or the tracking goes
+ * bad) hands over to the whole-piece search. NaN: no cue, search the whole
+ * piece (as after create). */
+void mar_follow_cue(mar_follow *f, double position);
 
 /* One tick of the show's clock, the way the engine and every offline tool
  * drive the follower: the n live frames that came since the last tick (in

@@ -78,6 +78,7 @@ cdef extern from "mar_engine.h" nogil:
         int start_holding
         int follow
         mar_follow_options follow_opt
+        double follow_cue
     ctypedef struct mar_record:
         int64_t tick
         int64_t time_ns

@@ -71,10 +71,11 @@ cdef class CoreEngine:
                   cnp.ndarray[cnp.float64_t, ndim=2, mode="c"] show,
                   cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] loudness,
                   size_t record_slots, size_t loudness_slots, bint start_holding=False,
-                  bytes follow_options=None, onsets=None):
+                  bytes follow_options=None, onsets=None, double follow_cue=NAN):
         """follow_options: a filled mar_follow_options (marionette._follow.options_bytes),
         or None to let the rate drive the playback clock; onsets: the stored
-        onset strength (ticks,) [dB] for the follower, or None."""
+        onset strength (ticks,) [dB] for the follower, or None; follow_cue:
+        where the live music starts [show ticks], NaN: unknown."""
         axes = np.ascontiguousarray(axes, dtype=AXIS_DTYPE)
         cdef size_t n_axes = axes.shape[0]
         if show.shape[0] != n_axes or loudness.shape[0] != show.shape[1]:
@@ -109,6 +110,7 @@ cdef class CoreEngine:
         opt.loudness_slots = loudness_slots
         opt.start_holding = start_holding
         opt.follow = follow_options is not None
+        opt.follow_cue = follow_cue
         if opt.follow:
             if len(follow_options) != sizeof(mar_follow_options):
                 free(c_axes)

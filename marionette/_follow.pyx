@@ -23,6 +23,7 @@ cdef extern from "mar_follow.h" nogil:
         MAR_FOLLOW_LOCKED
         MAR_FOLLOW_HOLDING
         MAR_FOLLOW_PAUSED
+        MAR_FOLLOW_WAITING
         MAR_FOLLOW_F_NO_FRAME
         MAR_FOLLOW_F_BAD_INPUT
         MAR_FOLLOW_F_MEASURED
@@ -91,14 +92,16 @@ cdef extern from "mar_follow.h" nogil:
     void mar_follow_destroy(mar_follow *f)
     void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
     void mar_follow_reset(mar_follow *f, double position)
+    void mar_follow_cue(mar_follow *f, double position)
     void mar_follow_get_counters(const mar_follow *f, mar_follow_counters *c)
     size_t mar_follow_stored_length(const mar_follow *f)
 
 
 MODES = {"smooth": MAR_FOLLOW_SMOOTH, "paper": MAR_FOLLOW_PAPER}
-STATES = ("searching", "locked", "holding", "paused")       # index = state code
-SEARCHING, LOCKED, HOLDING, PAUSED = (MAR_FOLLOW_SEARCHING, MAR_FOLLOW_LOCKED, MAR_FOLLOW_HOLDING,
-                                      MAR_FOLLOW_PAUSED)
+STATES = ("searching", "locked", "holding", "paused", "waiting")    # index = state code
+SEARCHING, LOCKED, HOLDING, PAUSED, WAITING = (MAR_FOLLOW_SEARCHING, MAR_FOLLOW_LOCKED,
+                                               MAR_FOLLOW_HOLDING, MAR_FOLLOW_PAUSED,
+                                               MAR_FOLLOW_WAITING)
 FLAGS = {"no_frame": MAR_FOLLOW_F_NO_FRAME, "bad_input": MAR_FOLLOW_F_BAD_INPUT,
          "measured": MAR_FOLLOW_F_MEASURED, "quiet": MAR_FOLLOW_F_QUIET, "jump": MAR_FOLLOW_F_JUMP,
          "search": MAR_FOLLOW_F_SEARCH, "rate_limit": MAR_FOLLOW_F_RATE_LIMIT, "end": MAR_FOLLOW_F_END}
@@ -275,6 +278,10 @@ cdef class Follower:
     def reset(self, double position=NAN):
         """Known position [stored ticks] of the live music now; NaN: unknown."""
         mar_follow_reset(self.f, position)
+
+    def cue(self, double position=NAN):
+        """The music will start at position [stored ticks]; NaN: unknown."""
+        mar_follow_cue(self.f, position)
 
     def counters(self):
         cdef mar_follow_counters c

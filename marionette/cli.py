@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from marionette.cmd_sync_sim import add_start_argument
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
@@ -78,7 +79,7 @@ def cmd_play(args) -> int:
     try:
         with Engine(config, show, lead=args.lead, interpolation=args.interpolation,
                     output=output, record=args.record or True, rate=args.rate,
-                    follow=follow) as engine:
+                    follow=follow, follow_start=args.start) as engine:
             if args.audio_device is not None:
                 from marionette.live_audio import LiveLoudness
                 audio = LiveLoudness(engine.push_loudness, device=args.audio_device or None,
@@ -197,6 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="follow the live music (default mode with --music or --audio-device: "
                         "the figure's [follow] table)")
     p.add_argument("--music", help="the live music from this recording, played back as if live")
+    add_start_argument(p)
     p.add_argument("--audio-device", nargs="?", const="",
                    help="the live music from this sound card input (index or part of its name; "
                         "no value: the default input); needs the 'audio' extra")

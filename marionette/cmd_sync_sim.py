@@ -25,6 +25,7 @@ and 200 ms of the truth, the median and the 95th percentile of the error [ms].
 """
 from __future__ import annotations
 
+import argparse
 import csv
 import math
 from pathlib import Path
@@ -100,9 +101,12 @@ def taught_frames(taught, period: float):
     return wav_frames(taught, period)
 
 
-def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool = True):
+def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool = True,
+             start: float | None = None):
     """Runs the follower over two recordings; returns (track, period [s], follower).
-    live_onsets False: the live frames carry no onset (a node's LOUDNESS)."""
+    live_onsets False: the live frames carry no onset (a node's LOUDNESS);
+    start: where the live music starts in the taught music [s] (the cue, as
+    Engine(follow_start=...)), None: unknown."""
     period = config.tick_period if config is not None else 0.020
     settings = config.follow if config is not None else None
     stored, stored_onsets = taught_frames(taught, period)
@@ -114,6 +118,11 @@ def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool 
     if len(stored) < 2:
         raise SyncSimError(f"{taught}: shorter than two ticks ({len(stored)} frames)")
     follower = Follower(stored, settings, period, onset=stored_onsets, mode=mode)
+    if start is not None:
+        if not (math.isfinite(start) and 0.0 <= start <= len(stored) * period):
+            raise SyncSimError(f"--start {start!r} s is outside the taught music "
+                               f"[0, {len(stored) * period:g}] s")
+        follower.cue(start / period)
     track = follower.run(sync_ticks(frames), sync_ticks(onsets))
     return track, period, follower
 
@@ -135,7 +144,7 @@ def write_track(path, track, period: float) -> None:
 def run(args) -> int:
     config = load_config(args.config) if args.config else None
     track, period, follower = simulate(args.taught, args.live, args.mode, config,
-                                       live_onsets=not args.loudness_only)
+                                       live_onsets=not args.loudness_only, start=args.start)
     write_track(args.out, track, period)
     n = len(track.position)
     locked = np.flatnonzero(track.state == STATES.index("locked"))
@@ -164,6 +173,26 @@ def run(args) -> int:
     return 0
 
 
+def start_time(text: str) -> float | None:
+    """--start: SECONDS into the taught music, or 'unknown' (None)."""
+    if text.strip().lower() == "unknown":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is neither seconds nor 'unknown'") from None
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"{text!r} must be >= 0 seconds, or 'unknown'")
+    return value
+
+
+def add_start_argument(p) -> None:
+    p.add_argument("--start", type=start_time, default=None, metavar="SECONDS|unknown",
+                   help="where in the taught music the live music starts (a cue, e.g. 0: the "
+                        "top): wait there through the silence, play from the music's onset; "
+                        "'unknown' (default): search the whole piece")
+
+
 def register(sub) -> None:
     p = sub.add_parser("sync-sim", help="follow a live recording against a taught one, offline")
     p.add_argument("--taught", required=True,
@@ -175,6 +204,7 @@ def register(sub) -> None:
                    help="smooth (fractional rate, default) or paper (double or skip a sample)")
     p.add_argument("--truth", help="CSV tick,position_s: print the accuracy against it")
     p.add_argument("--config", help="figure TOML for the tick period and [follow] settings")
+    add_start_argument(p)
     p.add_argument("--loudness-only", action="store_true",
                    help="live frames without onsets, as servo nodes send them (LOUDNESS)")
     p.set_defaults(run=run)

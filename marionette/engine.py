@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import errno
 import os
+import math
 import threading
 import time
 import warnings
@@ -90,13 +91,19 @@ class Engine:
     start_pose: where the figure stands, at rest, when the engine is made:
     None (default) means at the show's first pose, and the show plays from
     the first tick; "home" or a pose {axis: position} means there, holding,
-    until blend_in() moves it into the show.
+    until blend_in() moves it into the show. follow: "smooth", "paper" or
+    True (the figure's [follow] mode) to let the live music drive the show
+    (push_loudness), None to let the rate drive it. follow_start: where in
+    the show's music the live music starts [s] (a cue, e.g. 0: the top): the
+    show waits there through the silence before the music and plays from
+    the music's onset (mar_follow_cue); None (default until the gaps in
+    docs/music.md are closed): unknown, the follower searches the whole piece.
     """
 
     def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
                  interpolation: str = "cubic", output=None, protocol: str | None = None,
                  record=None, rate: float = 1.0, on_limits: str = "error", start_pose=None,
-                 follow: str | None = None, poll: str = "all"):
+                 follow: str | None = None, poll: str = "all", follow_start: float | None = None):
         if lead not in LEAD_MODES:
             raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
         if interpolation not in INTERPOLATIONS:
@@ -109,7 +116,9 @@ class Engine:
         self.config = config
         self.show = fit_to_figure(show, config, on_limits)
         positions = np.ascontiguousarray(self.show.positions, dtype=np.float64)
-        start = positions[:, 0] if start_pose is None else self._pose(start_pose, fill=None)
+        cue = self._cue(follow_start) if follow is not None else float("nan")
+        first = 0 if math.isnan(cue) else min(int(round(cue)), positions.shape[1] - 1)
+        start = positions[:, first] if start_pose is None else self._pose(start_pose, fill=None)
         self.follow = follow
         self._core = _core.CoreEngine(
             config.tick_period, LEAD_MODES[lead], INTERPOLATIONS[interpolation],
@@ -117,7 +126,7 @@ class Engine:
             np.ascontiguousarray(self.show.loudness, dtype=np.float64),
             RECORD_SLOTS if record else 0, LOUDNESS_SLOTS, start_pose is not None,
             None if follow is None else follower_options(config, self.show, follow),
-            self.show.onsets if follow is not None else None)
+            self.show.onsets if follow is not None else None, cue)
         self._request_lock = threading.Lock()
         self.recorder = None
         if record:
@@ -291,6 +300,16 @@ class Engine:
         if not (0.0 <= rate <= MAX_RATE):
             raise ValueError(f"rate {rate!r} is outside [0, {MAX_RATE}] show ticks per tick")
         _raise_for(self._core.set_rate(float(rate)), "set_rate")
+
+    def _cue(self, start: float | None) -> float:
+        """follow_start [s of the show] as a cue [show ticks]; None: NaN, unknown."""
+        if start is None:
+            return float("nan")
+        start = float(start)
+        if not (math.isfinite(start) and 0.0 <= start <= self.show.duration):
+            raise ValueError(f"follow_start {start!r} s is outside the show's music "
+                             f"[0, {self.show.duration:g}] s (None: unknown)")
+        return start / self.config.tick_period
 
     def seek(self, position: float) -> None:
         """Jump the playback position [show ticks]; the hard limits smooth the jump."""

@@ -148,6 +148,12 @@ class Follower:
         a seek); None: unknown, search the whole piece."""
         self._f.reset(float("nan") if position is None else float(position))
 
+    def cue(self, position: float | None = 0.0) -> None:
+        """The live music will start at position [stored ticks] (a cue): wait
+        there for its onset, then play from it (mar_follow_cue); None:
+        unknown, search the whole piece."""
+        self._f.cue(float("nan") if position is None else float(position))
+
     def counters(self) -> dict:
         """steps, frames, missing, bad_input, measurements, rejected, locks,
         pauses, resumes, search_steps."""

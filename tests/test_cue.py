@@ -1,0 +1,136 @@
+"""The cue (mar_follow_cue): the show waits at a known place through the
+silence before the music, plays from the music's onset, and never locks on
+the cue's word alone. Random decks from the bench's synthesizer and tape
+deck, fixed seeds."""
+import numpy as np
+import pytest
+
+from conftest import make_figure
+from marionette.bench.music import STYLES, synthesize
+from marionette.bench.tape import Deck, play
+from marionette.engine import Engine
+from marionette.follow import STATES, Follower, sync_ticks
+from marionette.loudness import loudness, onsets
+from marionette.show import Show
+
+T = 0.020
+LOCKED, WAITING = STATES.index("locked"), STATES.index("waiting")
+
+
+def live_frames_of(samples, rate):
+    """(loudness, onset strength [dB]) frames of a recording."""
+    return loudness(samples, rate), onsets(samples, rate)
+
+
+def taught(style, seed):
+    piece = synthesize(style, seed=seed)
+    return piece, live_frames_of(piece.samples, piece.sample_rate)
+
+
+def track_of(piece, stored, deck, cue):
+    played = play(piece.samples, piece.sample_rate, deck)
+    loud, onset = live_frames_of(played.samples, played.sample_rate)
+    f = Follower(stored[0], onset=stored[1])
+    f.cue(cue)
+    track = f.run(sync_ticks(loud)[:len(played.truth)], sync_ticks(onset)[:len(played.truth)])
+    return track, played, track.position * T - played.truth
+
+
+def cue_at_the_top(styles, seed):
+    """Decks at 0.94-1.06 from the top, 20 dB hiss: within 50 ms on at least
+    99 % of the ticks from 1 s on, LOCKED by 2.5 s, never LOCKED off."""
+    rng = np.random.default_rng(seed)
+    for case in range(8):
+        piece, stored = taught(styles[case % len(styles)], int(rng.integers(1, 100)))
+        deck = Deck(speed=float(rng.uniform(0.94, 1.06)), wow=0.002, snr_db=20.0, start=0.0,
+                    seconds=20.0, sample_rate=11025, seed=case)
+        track, _, err = track_of(piece, stored, deck, 0.0)
+        t = np.arange(len(err)) * T
+        assert np.mean(np.abs(err[t >= 1.0]) <= 0.05) >= 0.99, (case, np.mean(np.abs(err[t >= 1.0]) <= 0.05))
+        locked = np.flatnonzero(track.state == LOCKED)
+        assert len(locked) and t[locked[0]] <= 2.5, (case, t[locked[:1]])
+        assert np.all(np.abs(err[locked]) <= 0.05), case
+
+
+@pytest.mark.xfail(strict=True, reason="not yet: one of eight decks is within 50 ms on 97.5 % of "
+                   "its ticks, not 99 %")
+def test_a_cue_at_the_top_plays_from_the_first_frame_of_music():
+    cue_at_the_top(("pop", "waltz", "techno"), 16)
+
+
+@pytest.mark.xfail(strict=True, reason="known gap: in ambient the cue's fits find no clear line in "
+                   "2 s and the tracker loses the place to the search (22-31 % within 50 ms)")
+def test_a_cue_at_the_top_of_slow_pads():
+    cue_at_the_top(("ambient",), 16)
+
+
+@pytest.mark.xfail(strict=True, reason="not yet: no false lock, but a waltz deck whose tape starts "
+                   "elsewhere is never found in 20 s (2.3 s from an unknown start): the cue's line "
+                   "fits too well to be refuted and the search beside does not lock")
+def test_a_wrong_cue_is_refuted_without_a_false_lock():
+    """The tape starts 10-60 s into the piece, the cue says the top: no
+    LOCKED tick more than 50 ms off, and the right place LOCKED at most
+    2.5 s later than from an unknown start (the cue's fits take 2 s)."""
+    rng = np.random.default_rng(30)
+    for case in range(8):
+        piece, stored = taught(STYLES[case % len(STYLES)], int(rng.integers(1, 100)))
+        deck = Deck(speed=float(rng.uniform(0.95, 1.05)), snr_db=20.0,
+                    start=float(rng.uniform(10.0, 60.0)), seconds=20.0, sample_rate=11025, seed=case)
+        track, _, err = track_of(piece, stored, deck, 0.0)
+        locked = np.flatnonzero(track.state == LOCKED)
+        assert np.all(np.abs(err[locked]) <= 0.05), (case, np.abs(err[locked]).max())
+        unknown, _, err_unknown = track_of(piece, stored, deck, None)
+        first = [np.flatnonzero((tr.state == LOCKED) & (np.abs(e) <= 0.05)) for tr, e in
+                 ((track, err), (unknown, err_unknown))]
+        cued_s, unknown_s = (x[0] * T if len(x) else np.inf for x in first)
+        assert cued_s <= unknown_s + 2.5, (case, cued_s, unknown_s)
+
+
+@pytest.mark.xfail(strict=True, reason="not yet: one of six decks (a cue 20 s in, after a leader) "
+                   "is not followed after the onset")
+def test_silence_before_the_music_waits_at_the_cue():
+    """A leader of hiss (the tape stands 1-3 s) before the music: the
+    follower WAITS at the cue with rate 0, then follows from the onset
+    (measured: 94 to 100 % of the ticks within 50 ms from 1 s after it)."""
+    rng = np.random.default_rng(5)
+    for case in range(6):
+        piece, stored = taught(STYLES[case % len(STYLES)], int(rng.integers(1, 100)))
+        leader = float(rng.uniform(1.0, 3.0))
+        cue = float(rng.choice([0.0, 20.0]))
+        deck = Deck(speed=float(rng.uniform(0.96, 1.04)), snr_db=25.0, start=cue,
+                    pauses=((0.0, leader),), seconds=leader + 10.0, sample_rate=11025, seed=case)
+        track, _, err = track_of(piece, stored, deck, cue / T)
+        t = np.arange(len(err)) * T
+        before = t < leader - 0.1
+        assert np.all(track.state[before] == WAITING), case
+        assert np.all(track.position[before] == cue / T) and np.all(track.rate[before] == 0.0), case
+        after = t >= leader + 1.0
+        assert np.mean(np.abs(err[after]) <= 0.05) >= 0.9, (case, np.mean(np.abs(err[after]) <= 0.05))
+
+
+def test_the_engine_waits_in_its_start_pose_until_the_music_starts():
+    """Engine(follow_start=...) in step mode: the commands stay at the show's
+    pose at the cue while only hiss comes, and the show plays after."""
+    piece, (loud, onset) = taught("waltz", 4)
+    config = make_figure(2, max_speed=50.0, max_accel=5000.0)
+    n = len(loud)
+    x = np.array([0.3 * np.sin(2 * np.pi * 0.3 * np.arange(n) * T + j) for j in range(2)])
+    show = Show(axis_names=config.axis_names, units=[a.unit for a in config.axes], positions=x,
+                loudness=loud, onsets=onset, tick_period=T)
+    deck = Deck(speed=1.03, snr_db=25.0, start=10.0, pauses=((0.0, 2.0),), seconds=8.0,
+                sample_rate=11025, seed=3)
+    played = play(piece.samples, piece.sample_rate, deck)
+    live_loud, live_onset = (sync_ticks(v) for v in live_frames_of(played.samples, played.sample_rate))
+    with Engine(config, show, follow=True, follow_start=10.0, record=True) as engine:
+        for k in range(len(played.truth)):
+            if not np.isnan(live_loud[k]):
+                engine.push_loudness(live_loud[k], live_onset[k])
+            engine.step(1)
+        r = engine.records()
+    t = np.arange(len(r)) * T
+    wait = t < 1.9
+    cue_tick = int(round(10.0 / T))
+    np.testing.assert_array_equal(r["command"][wait], np.repeat(x[:, [cue_tick]].T, wait.sum(), axis=0))
+    assert np.all(r["position"][wait] == cue_tick)
+    err = r["position"] * T - played.truth
+    assert np.mean(np.abs(err[t >= 3.0]) <= 0.05) >= 0.98
