@@ -17,6 +17,11 @@ The sound card comes through the optional ``sounddevice`` package (the
 ``audio`` extra: ``pip install 'marionette[audio]'``). Without it, without
 PortAudio, or without an input device, LiveLoudness raises AudioError
 saying which and what to do.
+
+While it runs, the source reports: the stream's input latency
+(``latency`` [s]), a lost source (``on_lost(reason)`` once, ``lost_reason``)
+with PortAudio's own stderr lines kept off the terminal and folded into the
+reason, and counts of frames, overflows and refused frames (docs/music.md).
 """
 from __future__ import annotations
 
