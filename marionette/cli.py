@@ -82,8 +82,14 @@ def cmd_play(args) -> int:
                     follow=follow, follow_start=args.start) as engine:
             if args.audio_device is not None:
                 from marionette.live_audio import LiveLoudness
+
+                def audio_lost(reason: str) -> None:      # at once, from the source's watchdog
+                    print(f"audio input {audio.name!r} lost: {reason}", file=sys.stderr, flush=True)
+
+                # the index comes as a string: the source takes digits as an index
                 audio = LiveLoudness(engine.push_loudness, device=args.audio_device or None,
-                                     onsets=True).start()
+                                     onsets=True, on_lost=audio_lost)
+                audio.start()
             if args.realtime:
                 engine.start(priority=args.priority, cpu=args.cpu, lock_memory=args.lock_memory,
                              max_ticks=n)
@@ -149,6 +155,13 @@ def cmd_play(args) -> int:
         speed = np.max(np.abs(np.diff(cmd[:, j]))) / config.tick_period if len(cmd) > 1 else 0.0
         print(f"  {axis.name:<18}{axis.unit:>5}{cmd[:, j].min():>10.4f}{cmd[:, j].max():>10.4f}"
               f"{speed:>11.4f}{axis.max_speed:>9.3g}")
+    if audio is not None:
+        latency = "-" if audio.latency is None else f"{audio.latency * 1e3:.0f} ms"
+        print(f"  audio input {audio.name!r}: {audio.frames} frames, input latency {latency}, "
+              f"{audio.overflows} overflows"
+              + (f"; LOST: {audio.lost_reason}" if audio.lost_reason is not None else ""))
+        if audio.lost_reason is not None:
+            return 1
     return 0
 
 
@@ -200,8 +213,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--music", help="the live music from this recording, played back as if live")
     add_start_argument(p)
     p.add_argument("--audio-device", nargs="?", const="",
-                   help="the live music from this sound card input (index or part of its name; "
-                        "no value: the default input); needs the 'audio' extra")
+                   help="the live music from this sound card input (its index or a part of its "
+                        "name, as listed when unknown; no value: the first input); needs the "
+                        "'audio' extra. A lost input is reported at once and the exit status is 1")
     p.set_defaults(run=cmd_play)
 
     p = sub.add_parser("check", help="validate a figure and a show")
