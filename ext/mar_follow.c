@@ -152,12 +152,16 @@
 #define LEADER_FRAMES 10        /* a cue's leader: steady frames before the music (0.2 s) [ticks] ... */
 #define LEADER_WAIT 25          /* ... none by this many frames: the music played from the first [ticks] */
 #define LEADER_CHECKS 20        /* ... or music, if it fits the cue at a multiple of LEADER_WAIT, up to this [1] */
+#define NOTE_DB 6.0             /* ... or a frame this strong in onsets (a note's attack) [dB] */
 #define RISE_DB 6.0             /* the music starts: a frame this far over the leader [dB] ... */
 #define RISE_START_DB 1.0       /* ... its rise began at the first frame this far over it [dB] */
-#define CUE_FITS 3              /* joint fits of rate and offset on lines through the cue, after ... */
-static const size_t CUE_FIT_AT[CUE_FITS] = {25, 50, 100};   /* ... this much music [ticks] */
+#define CUE_FITS 32             /* joint fits of rate and offset on lines through the cue, after ... */
+static const size_t CUE_FIT_AT[CUE_FITS] = {        /* ... this much music [ticks]: every 0.1 s */
+    25, 30, 35, 40, 45, 50, 55, 60, 65, 70, 75, 80,   /* while the rate is open, then every 0.5 s */
+    85, 90, 95, 100, 125, 150, 175, 200, 225, 250, 275, 300, 325, 350, 375, 400, 425, 450, 475, 500};
+#define CUE_REFUTE_FIT 15       /* the fit (index) that refutes the cue when nothing fits (2 s) */
 #define CUE_RATE_SPAN 0.07      /* rates 1 +- this [stored ticks per tick] ... */
-#define CUE_RATE_STEP 0.0025    /* ... in these steps */
+#define CUE_RATE_STEP 0.005     /* ... in these steps */
 #define CUE_LAGS 5              /* offsets from the line through the cue, either way [ticks] */
 #define CUE_LOCK 0.8            /* a fit this good, and sharp, locks the cue [1] ... */
 #define CUE_PRIOR 0.5           /* ... if it leads every other place by this times a search lock's lead [1] */
@@ -221,7 +225,9 @@ struct mar_follow {
     double p, r;                /* [stored ticks], [stored ticks per tick] */
     double P00, P01, P11;       /* covariance of (p, r) */
     double conf;
-    int ever;                   /* a position is known (lock or reset) */
+    int ever;                   /* a position is known (lock, reset or cue) */
+    int located;                /* ... and proven or given (lock, reset), not only cued: the first
+                                 * search's patience is for a follower that was never located */
     uint64_t last_good;         /* step of the last accepted measurement */
     uint64_t bad_since, quiet_since;  /* unclear / quiet steps since last_good */
     double gain;                /* live minus stored level [dB] */
@@ -286,7 +292,10 @@ struct mar_follow {
     int cue_pending;            /* cued, the music started, no fit has locked yet: never LOCKED by tracking */
     uint64_t cue_onset;         /* step of the music's first frame */
     int cue_fits;               /* joint fits done */
+    double cue_prev;            /* the last fit's line at its step if it was clear [stored ticks], else NaN */
+    uint64_t cue_prev_t;        /* ... that step */
     uint64_t wait_frames;       /* WAITING: frames heard */
+    uint64_t wait_start;        /* ... the step of the first */
     uint64_t leader;            /* ... frames of the steady leader (the run within STEADY_RANGE_DB) */
     double lead_lo, lead_hi;    /* ... its level range [dB] */
     uint64_t rise_step;         /* ... first frame of a rise over it, 0: none */
@@ -608,14 +617,14 @@ void mar_follow_reset(mar_follow *f, double position)
         double last = (double)f->n;
         f->p = position < 0.0 ? 0.0 : position > last ? last : position;
         f->r = 1.0;
-        f->ever = 1;
+        f->ever = f->located = 1;
         f->state = MAR_FOLLOW_HOLDING;
         f->conf = 0.0;
         kf_init(f, 1.0, 1e-4);
     } else {
         f->p = 0.0;
         f->r = 0.0;
-        f->ever = 0;
+        f->ever = f->located = 0;
         f->state = MAR_FOLLOW_SEARCHING;
         f->conf = 0.0;
         kf_init(f, 1e6, 1e-2);
@@ -634,6 +643,7 @@ void mar_follow_cue(mar_follow *f, double position)
         j++;
     f->cue_from = f->p > (double)j ? f->p : (double)j;
     f->state = MAR_FOLLOW_WAITING;
+    f->located = 0;                         /* a cue is a claim, not yet a place */
     f->r = 0.0;
     f->wait_frames = f->leader = f->rise_step = 0;
     f->last = (mar_follow_out){.position = f->p, .rate = 0.0, .confidence = 0.0, .state = f->state};
@@ -1038,7 +1048,7 @@ static void line_fix(const half_peak hp[2], double *ep, double *er)
  * may still be of the old place.) */
 static size_t verify_cap(const mar_follow *f)
 {
-    uint64_t waited = !f->ever && f->t > f->search_from ? f->t - f->search_from : 0;
+    uint64_t waited = !f->located && f->t > f->search_from ? f->t - f->search_from : 0;
     size_t cap = f->opt.verify_window, limit = cap > LONG_VERIFY ? cap : LONG_VERIFY;
     if (waited > PATIENT_AFTER)
         cap += (size_t)(waited - PATIENT_AFTER);
@@ -1506,7 +1516,7 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     kf_init(f, 0.25, 1e-5);
     f->seg_start = e->since;
     f->state = MAR_FOLLOW_LOCKED;
-    f->ever = 1;
+    f->ever = f->located = 1;
     f->last_good = f->t;
     f->bad_since = f->quiet_since = 0;
     f->silent_run = 0;
@@ -1537,6 +1547,19 @@ static int music_started(mar_follow *f, int have, uint64_t *onset)
         return 0;
     double db = f->ldb[ring(f, f->t)];
     uint64_t heard = ++f->wait_frames;
+    if (heard == 1) {       /* the music may be playing elsewhere: the search listens from here */
+        f->wait_start = f->cue_onset = f->t;      /* line_fit's music from the first frame */
+        start_search(f, f->t);
+    }
+    /* a note: hiss and a room's noise read under about 1 dB of onsets, a
+     * note's attack several times that */
+    size_t slot = ring(f, f->t);
+    double strength = f->onsets && f->opt.onset_weight > 0.0 ? (f->lo[slot] - f->lf[slot]) / f->opt.onset_weight
+                                                             : NAN;     /* NaN: the level decides */
+    if (strength > NOTE_DB) {
+        *onset = f->leader < LEADER_FRAMES ? f->wait_start : f->rise_step ? f->rise_step : f->t;
+        return 1;
+    }
     if (f->leader < LEADER_FRAMES) {                    /* the leader forming */
         double lo = f->leader ? fmin(f->lead_lo, db) : db, hi = f->leader ? fmax(f->lead_hi, db) : db;
         if (f->leader && hi - lo > STEADY_RANGE_DB)
@@ -1574,7 +1597,7 @@ static int music_started(mar_follow *f, int have, uint64_t *onset)
 /* The music started at step `onset`: play from the cue at rate 1. */
 static void play_from_cue(mar_follow *f, uint64_t onset)
 {
-    f->cue_onset = f->seg_start = f->search_from = onset;
+    f->cue_onset = f->seg_start = onset;
     f->p = f->cue_from + (double)(f->t - onset) + 0.5;     /* its middle, on average */
     f->r = 1.0;
     kf_init(f, 1.0, 1e-3);
@@ -1582,17 +1605,23 @@ static void play_from_cue(mar_follow *f, uint64_t onset)
     f->ever = 1;
     f->cue_pending = 1;
     f->cue_fits = 0;
+    f->cue_prev = NAN;
     f->measured = 0;
     f->last_good = f->t;
     f->bad_since = f->quiet_since = 0;
+    start_search(f, onset);         /* beside the cue; it may listen since the first frame (the
+                                     * music may be elsewhere), its gap rule drops a leader */
 }
 
 /* The rate and offset of the line through the cue (the music's first
  * frame `ages` frames ago) that fit the live frames since best: returns its
  * correlation at the whole lag (as cue_rival scores), -1 if none fits, NaN
  * if the live frames are too flat to tell (no evidence either way). */
-static double line_fit(mar_follow *f, size_t ages, double *best_r, double *best_d, double *best_kappa)
+static double line_fit_ch(mar_follow *f, int onset, size_t ages, double *best_r, double *best_d,
+                          double *best_kappa)
 {
+    const double *ring_buf = onset ? f->lo : f->lf, *sfeat = onset ? f->of : f->sf;
+    const double *q1 = onset ? f->o1 : f->p1, *q2 = onset ? f->o2 : f->p2;
     double best = NAN;                                          /* no evidence yet */
     *best_r = 1.0, *best_d = *best_kappa = 0.0;
     int steps = (int)(CUE_RATE_SPAN / CUE_RATE_STEP + 0.5);
@@ -1602,10 +1631,10 @@ static double line_fit(mar_follow *f, size_t ages, double *best_r, double *best_
         long j0;
         double c, rho[2 * CUE_LAGS + 1], h, kappa;
         int edge;
-        size_t m = resample(f, p, r, ages, &j0, &c);
+        size_t m = resample_ch(f, ring_buf, p, r, ages, &j0, &c);
         if (m < ages / 2)
             continue;
-        if (correlate(f, f->rs, 0, m, j0, CUE_LAGS, rho) < f->opt.quiet_db)
+        if (correlate_ch(f, sfeat, q1, q2, f->rs, 0, m, j0, CUE_LAGS, rho) < f->opt.quiet_db)
             continue;                                           /* flat: no evidence */
         double d = peak(rho, CUE_LAGS, &h, &kappa, &edge);
         if (isnan(best))
@@ -1614,6 +1643,21 @@ static double line_fit(mar_follow *f, size_t ages, double *best_r, double *best_
             best = rho[(int)lround(d) + CUE_LAGS], *best_r = r, *best_d = d, *best_kappa = kappa;
     }
     return best;
+}
+
+static double line_fit(mar_follow *f, size_t ages, double *best_r, double *best_d, double *best_kappa)
+{
+    return line_fit_ch(f, 0, ages, best_r, best_d, best_kappa);
+}
+
+/* With onsets: the line the onset feature fits best places the cue (rises
+ * survive a room's colouring and sustained pads, as in the tracker); the
+ * loudness's line stays where the onsets have no clear peak. */
+static void onset_line(mar_follow *f, size_t ages, double *r, double *d)
+{
+    double r2, d2, kappa2;
+    if (f->onsets && line_fit_ch(f, 1, ages, &r2, &d2, &kappa2) >= f->opt.track_threshold && kappa2 > 0.0)
+        *r = r2, *d = d2;
 }
 
 /* The best correlation of the live frames resampled along a line (rs[0 ..
@@ -1640,11 +1684,21 @@ static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
 static void cue_fit(mar_follow *f, uint32_t *flags)
 {
     size_t ages = (size_t)(f->t + 1 - f->cue_onset);
-    if (ages != CUE_FIT_AT[f->cue_fits])
+    if (ages < CUE_FIT_AT[f->cue_fits])
         return;
     f->cue_fits++;
     double best_r, best_d, best_kappa;
     double best = line_fit(f, ages, &best_r, &best_d, &best_kappa);
+    if (f->wait_start < f->cue_onset) {
+        /* a quiet, steady start of the music may have been taken for the
+         * leader: the line from the first frame heard competes */
+        size_t early = (size_t)(f->t + 1 - f->wait_start);
+        double r2, d2, kappa2, fit2 = line_fit(f, early, &r2, &d2, &kappa2);
+        if (fit2 > best || (isnan(best) && fit2 >= f->opt.track_threshold)) {
+            best = fit2, best_r = r2, best_d = d2, best_kappa = kappa2, ages = early;
+            f->cue_onset = f->seg_start = f->wait_start;
+        }
+    }
     double rival = -1.0;
     if (best >= CUE_LOCK && lockable_peak(f, best, best_kappa)) {
         long j0;
@@ -1653,13 +1707,21 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         rival = m ? cue_rival(f, m, j0, best_d) : 1.0;
     }
     double lead = fisher(best) - fisher(rival);
-    if (best >= CUE_LOCK && lockable_peak(f, best, best_kappa) && lead >= CUE_PRIOR * lock_lead(f, ages)) {
-        f->p = f->cue_from + best_r * ((double)ages - 0.5) + best_d;
+    if (best >= f->opt.track_threshold)
+        onset_line(f, ages, &best_r, &best_d);
+    int clear = best >= CUE_LOCK && lockable_peak(f, best, best_kappa) && lead >= CUE_PRIOR * lock_lead(f, ages);
+    double line_now = f->cue_from + best_r * ((double)ages - 0.5) + best_d;     /* [stored ticks] */
+    /* two clear fits in a row on the same line, as a search lock is confirmed */
+    int confirmed = clear && fabs(line_now - (f->cue_prev + best_r * (double)(f->t - f->cue_prev_t))) <= 1.0;
+    f->cue_prev = clear ? line_now : NAN;
+    f->cue_prev_t = f->t;
+    if (confirmed) {
+        f->p = line_now;
         f->r = best_r;
         double rate_sd = 1.0 / (double)ages;                    /* a tick over the fit [1] */
         kf_init(f, 0.25, rate_sd * rate_sd);
         f->cue_pending = 0;
-        f->measured = 1;
+        f->located = f->measured = 1;
         f->state = MAR_FOLLOW_LOCKED;
         f->last_good = f->t;
         f->bad_since = 0;
@@ -1667,12 +1729,19 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         f->h_slow = f->h_fast = best;
         f->c.locks++;
         *flags |= MAR_FOLLOW_F_MEASURED;
-    } else if (f->cue_fits == CUE_FITS && best < f->opt.track_threshold) {   /* NaN: flat, not refuted */
+    } else if (best >= f->opt.track_threshold && lockable_peak(f, best, best_kappa)) {
+        /* a clear fit over all the music since the onset places the line
+         * better than the tracker's first short windows (their rate runs
+         * away in sustained music); the place stays unproven. A flat peak
+         * (slow pads) leaves the rate open: the tracker keeps it */
+        f->p = f->cue_from + best_r * ((double)ages - 0.5) + best_d;
+        f->r = best_r;
+        kf_init(f, 1.0, 4.0 / ((double)ages * (double)ages));  /* a tick over the fit, twice [1] */
+    } else if (f->cue_fits == CUE_REFUTE_FIT + 1 && best < f->opt.track_threshold) {   /* NaN: flat, not refuted */
         f->cue_pending = 0;                                     /* refuted */
         f->state = MAR_FOLLOW_SEARCHING;
         f->doubt = f->probation = f->regaining = 0;
-        stop_search(f);
-        start_search(f, f->cue_onset);
+        start_search(f, f->cue_onset);                          /* running since the first frame */
     }
 }
 
@@ -1827,7 +1896,7 @@ static void run_search(mar_follow *f, uint32_t *flags)
         else
             e->p += e->r;
     }
-    if (f->ever && f->state != MAR_FOLLOW_SEARCHING) {
+    if (f->ever && f->state != MAR_FOLLOW_SEARCHING && f->state != MAR_FOLLOW_WAITING) {
         /* the tracker's own hypothesis competes as the "track" entry */
         if (!tr) {
             for (int i = 0; i < POOL && !tr; i++)
@@ -2114,7 +2183,7 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         start_search(f, from);
         if (!f->regaining)
             f->regaining = 1, f->regain_ok = 0, f->regain_bad = f->bad_since;
-    } else if (f->probation || (f->cue_pending && f->cue_fits == CUE_FITS)) {
+    } else if (f->probation || (f->cue_pending && f->cue_fits > CUE_REFUTE_FIT)) {
         start_search(f, f->seg_start);      /* an unproven place: the search decides */
     } else if (ok && f->searching && !f->doubt && !f->regaining) {
         stop_search(f);
@@ -2172,7 +2241,7 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
     /* 3. the searches, when not locked or in doubt */
     if (f->near && f->state != MAR_FOLLOW_PAUSED && !resumed)
         near_search(f, &flags);
-    if (f->state == MAR_FOLLOW_SEARCHING && have)
+    if ((f->state == MAR_FOLLOW_SEARCHING || f->state == MAR_FOLLOW_WAITING) && have)
         search_gap(f);
     else
         f->gap_run = 0;
