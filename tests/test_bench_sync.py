@@ -1,6 +1,7 @@
 """marionette bench sync: a quick run gives the documented keys for both
-modes; the figures are computed the documented way (checked on made-up
-tracks whose errors are known)."""
+modes and the cue's sets of runs; the figures are computed the documented
+way (checked on made-up tracks whose errors are known), and a bad cued run
+is reported as failing the cue's targets."""
 from __future__ import annotations
 
 import json
@@ -18,25 +19,68 @@ KEYS = {"mode", "within20", "within50", "within200", "median_ms", "p95_ms", "loc
 LOCKED, SEARCHING, PAUSED = (STATES.index(s) for s in ("locked", "searching", "paused"))
 
 
+SETS = [("smooth", "unknown"), ("paper", "unknown"), ("smooth", "cue at top"),
+        ("smooth", "top, unknown"), ("smooth", "wrong cue"), ("smooth", "wrong cue, unknown")]
+
+
+def labels(targets):
+    return {f"{k} {op} {b:g}" for k, op, b in targets}
+
+
+@pytest.fixture(scope="module")
+def quick_results():
+    """One quick run, shared: the table and --strict tests format it again."""
+    return sync.run(quick=True, seeds=1)
+
+
 def test_quick_run_has_the_documented_keys(capsys):
     assert sync.main(["--json", "--quick"]) == 0
     results = json.loads(capsys.readouterr().out)
-    assert [r["mode"] for r in results] == ["smooth", "paper"]
+    assert [(r["mode"], r["start"]) for r in results] == SETS
     for r in results:
         assert KEYS <= set(r)
         assert 0.0 <= r["within20"] <= r["within50"] <= r["within200"] <= 1.0
         assert r["us_per_tick_median"] > 0 and r["us_per_tick_p99"] >= r["us_per_tick_median"]
-        assert len(r["scenarios"]) == 2 and "machine" in r
-    assert set(results[0]["targets"]) == {f"{k} {op} {b:g}" for k, op, b in sync.TARGETS}
+        assert "machine" in r
+    by_set = {(r["mode"], r["start"]): r for r in results}
+    for key in SETS[:4]:                        # two scenarios and their top variants
+        assert len(by_set[key]["scenarios"]) == 2
+    assert [s["start_s"] for s in by_set["smooth", "cue at top"]["scenarios"]] == [0.0, 0.0]
+    assert [s["start_s"] for s in by_set["smooth", "unknown"]["scenarios"]] != [0.0, 0.0]
+    assert len(by_set["smooth", "wrong cue"]["scenarios"]) == 1
+    assert 10.0 <= by_set["smooth", "wrong cue"]["scenarios"][0]["start_s"] <= 60.0
+    assert {"cue_lock_s_max", "cue_lock_s_median"} <= set(by_set["smooth", "cue at top"])
+    assert {"later_s_max", "later_s_median"} <= set(by_set["smooth", "wrong cue"])
+    assert set(results[0]["targets"]) == labels(sync.TARGETS)
+    assert set(by_set["smooth", "cue at top"]["targets"]) == labels(sync.CUE_TARGETS)
+    assert set(by_set["smooth", "wrong cue"]["targets"]) == labels(sync.WRONG_CUE_TARGETS)
+    assert by_set["smooth", "top, unknown"]["targets"] == {}
 
 
-def test_table_names_targets_and_machine(capsys):
-    assert sync.main(["--quick"]) == 0
-    out = capsys.readouterr().out
+def test_table_names_targets_and_machine(quick_results):
+    out = sync.format_table(quick_results)
     assert "machine:" in out and "targets (smooth mode" in out
     assert ("all targets met" in out) or ("FAILED" in out)
-    for key, op, bound in sync.TARGETS:
+    for key, op, bound in sync.TARGETS + sync.CUE_TARGETS + sync.WRONG_CUE_TARGETS:
         assert f"{key} {op} {bound:g}" in out
+    assert "targets, cue at top" in out and "targets, wrong cue" in out
+    assert "top decks, cued at the top (every tick)" in out
+    # a scenario: smooth and paper rows, and its top variant cued and not;
+    # the wrong-cue deck: one row
+    assert out.count("pop/pauses ") == 4 and out.count("pop/wrong1 ") == 1
+
+
+def test_strict_exits_1_when_a_target_fails(quick_results, monkeypatch, capsys):
+    results = [dict(r, targets=dict(r["targets"])) for r in quick_results]
+    for r in results:
+        r["targets"] = {k: True for k in r["targets"]}
+    monkeypatch.setattr(sync, "run", lambda *a, **k: results)
+    assert sync.main(["--quick", "--strict"]) == 0
+    cue = next(r for r in results if r["start"] == "cue at top")
+    cue["targets"]["false_locks <= 0"] = False
+    assert sync.main(["--quick", "--strict"]) == 1
+    assert sync.main(["--quick"]) == 0                         # without --strict: a report only
+    capsys.readouterr()
 
 
 def test_seconds_must_be_sensible():
@@ -108,3 +152,87 @@ def test_overlapping_pauses_restart_the_tape_once():
     played = play(x, 16000, Deck(pauses=((1.0, 2.0), (2.5, 3.0)), seconds=8.0))
     assert played.resumes == [pytest.approx(5.5)]             # not at 3.0: the second pause holds it
     assert played.paused[int(4.0 / 0.02)] and not played.paused[int(5.6 / 0.02)]
+
+
+def cued_run(err, state, onset_s=0.0):
+    """A cued run's figures (from 1 s after the onset, lock within 50 ms)."""
+    return sync.measure(*made_up(err, state), from_s=onset_s + sync.CUE_FROM_S, onset_s=onset_s)
+
+
+def test_a_good_cued_run_meets_the_cue_targets():
+    n = 1000                                                  # 20 s
+    err = np.zeros(n)
+    state = np.full(n, LOCKED)
+    state[:20] = SEARCHING                                    # LOCKED from 0.4 s on
+    err[:20] = 0.3                                            # searching: wherever
+    s = sync.summarize([cued_run(err, state)])
+    assert s["cue_lock_s_max"] == pytest.approx(0.4)
+    assert s["within50"] == 1.0 and s["false_locks"] == 0
+    assert all(ok for _, _, ok in sync.check_targets(s, sync.CUE_TARGETS))
+
+
+def test_a_bad_cued_run_fails_the_cue_targets():
+    n = 1000                                                  # 20 s, the onset at 0
+    err = np.zeros(n)
+    state = np.full(n, LOCKED)
+    state[:40] = SEARCHING                                    # the cue's fits: 0.8 s
+    err[:40] = 0.03                                           # at the right place, not LOCKED
+    state[30:35] = LOCKED
+    err[30:35] = 2.0                                          # LOCKED 2 s off at 0.6 s: a false lock
+    err[100:120] = 0.1                                        # 20 ticks 100 ms off after the first second
+    m = cued_run(err, state)
+    s = sync.summarize([m])
+    assert m["cue_lock_s"] == pytest.approx(0.8)              # the first LOCKED tick within 50 ms
+    assert s["false_locks"] == 1
+    assert s["within50"] == pytest.approx(1 - 20 / (n - 50))  # counted from 1 s on
+    failed = {label for label, _, ok in sync.check_targets(s, sync.CUE_TARGETS) if not ok}
+    assert failed == labels(sync.CUE_TARGETS)                 # all three fail
+
+
+def test_cue_accuracy_counts_from_a_second_after_the_onset():
+    n = 500
+    err = np.zeros(n)
+    err[:100] = 1.0                                           # 2 s wrong: the onset is at 1 s
+    state = np.full(n, LOCKED)
+    m = cued_run(err, state, onset_s=1.0)
+    assert len(m["errors"]) == n - 100 and np.all(m["errors"] < 1e-9)
+    assert m["cue_lock_s"] == pytest.approx(1.0)              # from the onset to 2.0 s
+
+
+def test_a_wrong_cue_found_later_fails():
+    n = 1500
+    err = np.full(n, 20.0)                                    # the tape is 20 s from the cue
+    state = np.full(n, SEARCHING)
+    unknown_err, unknown_state = err.copy(), state.copy()
+    unknown_err[150:], unknown_state[150:] = 0.0, LOCKED      # found at 3 s
+    err[250:], state[250:] = 0.0, LOCKED                      # cued: found at 5 s
+    cued = sync.measure(*made_up(err, state))
+    unknown = sync.measure(*made_up(unknown_err, unknown_state))
+    cued["later_s"] = sync.wrong_cue_later(cued, unknown)
+    s = sync.summarize([cued])
+    assert s["later_s_max"] == pytest.approx(2.0)
+    targets = {label: ok for label, _, ok in sync.check_targets(s, sync.WRONG_CUE_TARGETS)}
+    assert targets == {"later_s_max <= 0": False, "false_locks <= 0": True}
+    never = sync.measure(*made_up(np.full(n, 20.0), np.full(n, SEARCHING)))
+    assert sync.wrong_cue_later(never, unknown) == math.inf
+    assert sync.wrong_cue_later(never, never) == 0.0
+    assert sync.wrong_cue_later(unknown, never) == -math.inf
+
+
+def test_a_missing_figure_fails_its_target():
+    assert [ok for _, _, ok in sync.check_targets({}, sync.CUE_TARGETS)] == [False] * 3
+
+
+def test_cue_decks():
+    durations = {style: 100.0 for style, _ in sync.PIECES}
+    runs = sync.scenarios(durations, None, False, 7)
+    top = sync.top_variants(runs)
+    assert [sc.deck.start for sc in top] == [0.0] * len(runs)
+    for a, b in zip(runs, top):                               # the same deck otherwise
+        assert {**a.deck.__dict__, "start": 0.0} == b.deck.__dict__ and a.target == b.target
+    wrong = sync.wrong_cue_decks(durations, None, False, 7)
+    assert len(wrong) == sync.WRONG_CUE_DECKS * len(sync.PIECES)
+    assert all(10.0 <= sc.deck.start <= 60.0 and sc.target for sc in wrong)
+    again = sync.wrong_cue_decks(durations, None, False, 7)
+    assert [sc.deck for sc in wrong] == [sc.deck for sc in again]
+    assert [sc.deck for sc in sync.scenarios(durations, None, False, 7)] == [sc.deck for sc in runs]

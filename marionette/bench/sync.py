@@ -38,6 +38,44 @@ Figures per mode, over the target scenarios (|speed - 1| <= 6 %, SNR >= 20 dB):
 Extra keys: lock_s_median, relock_after_pause_s_median, relock_after_jump_s_max [s],
 scenarios (one row per run) and all_scenarios (the same figures over every
 run, the 10 dB SNR ones too).
+
+The cue (Follower.cue, docs/music.md), smooth mode only. None of the
+scenarios above starts at the top (their start is drawn), so each has a
+"top" variant: the same deck (speed, drift, wow, flutter, hiss, room, gain
+ramps, pauses, jump, sample rate, seed) with start = 0. Each top deck runs
+twice: cued at the top (Follower.cue(0.0) before the run; rows "cue at top")
+and from an unknown start (rows "top, unknown"), so that the two compare on
+the same audio. The existing rows above do not include them and stay as
+they were. Besides, WRONG_CUE_DECKS decks per piece and seed start 10-60 s
+into the piece (drawn from their own stream of the seeded rng, so the
+draws of the scenarios above do not move; speed 0.94-1.06, 20 dB hiss)
+and run cued at the top (rows "wrong cue") and from an unknown start (rows
+"wrong cue, unknown"). Figures of these runs:
+
+- onset_s: live time [s] at which the deck's first audible frame starts
+  (the first stored frame within AUDIBLE_DB of the stored music's 90th
+  percentile level, the follower's own rule for the cue; every bench piece
+  is audible from its first frame, so onset_s is 0);
+- within20/50/200, median_ms, p95_ms for the top decks: on the ticks from
+  CUE_FROM_S = 1 s after the onset on (the first second of music excluded),
+  without the 0.5 s after a pause and the 3 s after a jump as above; the
+  wrong-cue decks are measured as the scenarios above (from 3 s on);
+- cue_lock_s_max, cue_lock_s_median: time from the onset to the first tick
+  LOCKED within CUE_LOCK_TOL_S = 50 ms of the truth [s] (inf: never);
+- false_locks: the bench's definition above (entries into LOCKED more than
+  FALSE_LOCK_S = 0.5 s off), for every run, cued or not;
+- later_s_max, later_s_median (wrong-cue decks): the time to the first
+  correct lock (lock_s, as above: LOCKED within 200 ms) of the cued run
+  minus that of the unknown-start run of the same deck [s]; inf when only
+  the cued run never locks, 0 when neither does;
+- us_per_tick_median, us_per_tick_p99: as above, but over every tick of the
+  run (the cue's work falls in its first seconds);
+- no_events: the figures over the target decks without a pause or a jump
+  (what the cue alone does; the targets are checked over all target decks).
+
+CUE_TARGETS hold for the "cue at top" rows, WRONG_CUE_TARGETS for the
+"wrong cue" rows; the unknown-start rows beside them have no targets.
+`--strict` exits 1 when any target fails (as `bench tick` and `bench jitter`).
 """
 from __future__ import annotations
 
@@ -45,7 +83,7 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -65,11 +103,18 @@ FALSE_LOCK_S = 0.5              # entering LOCKED this far off is a false lock [
 LOCKED = STATES.index("locked")
 PAUSED = STATES.index("paused")
 PIECES = (("pop", 1), ("waltz", 2), ("ambient", 3), ("techno", 4))
+AUDIBLE_DB = 40.0               # stored frames this far under the 90th percentile level are not music [dB]
+CUE_FROM_S = 1.0                # cued accuracy counts from this long after the music's onset [s]
+CUE_LOCK_TOL_S = 0.05           # "locked at the cue": LOCKED this close to the truth [s]
+WRONG_CUE_DECKS = 2             # decks per piece and seed whose tape starts away from the cue [1]
+WRONG_CUE_START_S = (10.0, 60.0)  # their tape starts this far into the piece [s]
 
 TARGETS = (("within20", ">=", 0.95), ("within50", ">=", 0.99), ("within200", ">=", 1.0),
            ("lock_s_max", "<=", 3.0), ("relock_after_pause_s_max", "<=", 0.5),
            ("false_locks", "<=", 0), ("us_per_tick_median", "<=", 10.0),
            ("us_per_tick_p99", "<=", 50.0))
+CUE_TARGETS = (("within50", ">=", 0.99), ("cue_lock_s_max", "<=", 0.5), ("false_locks", "<=", 0))
+WRONG_CUE_TARGETS = (("later_s_max", "<=", 0.0), ("false_locks", "<=", 0))
 
 
 @dataclass
@@ -135,8 +180,60 @@ def scenarios(duration: dict, seconds: float | None, quick: bool, seed: int = SE
     return out
 
 
-def measure(track, played, ns=None) -> dict:
-    """Figures of one run (see the module docstring)."""
+def top_variants(runs: list[Scenario]) -> list[Scenario]:
+    """The same decks started at the top of the piece (start 0), for the
+    cue; names unchanged (the rows say which set they belong to)."""
+    return [Scenario(sc.name, sc.piece, replace(sc.deck, start=0.0), sc.target) for sc in runs]
+
+
+def wrong_cue_decks(duration: dict, seconds: float | None, quick: bool, seed: int = SEED) -> list[Scenario]:
+    """WRONG_CUE_DECKS decks per piece whose tape starts 10-60 s in (at
+    least 20 s before the piece's end) while the cue will say the top."""
+    out = []
+    for index, (piece, _) in enumerate(PIECES if not quick else PIECES[:1]):
+        # a stream of its own from the same seed: scenarios() draws as before
+        rng = np.random.default_rng((seed, index, 1))
+        d = duration[piece]                                            # [s]
+        lo, hi = WRONG_CUE_START_S[0], min(WRONG_CUE_START_S[1], d - 20.0)    # [s]
+        for k in range(1 if quick else WRONG_CUE_DECKS):
+            start = float(rng.uniform(lo, hi))                         # [s] into the piece
+            speed = float(rng.uniform(0.94, 1.06))                     # [1]
+            deck = Deck(speed=speed, wow=0.002, wow_hz=0.7, flutter=0.0005, flutter_hz=6.0,
+                        snr_db=20.0, sample_rate=16000, start=start, seed=seed + 100 * index + 50 + k,
+                        seconds=seconds if seconds and seconds < d else None)
+            out.append(Scenario(f"{piece}/wrong{k + 1}", piece, deck, True))
+    return out
+
+
+def audible_from(stored) -> float:
+    """Taught time [s] of the first audible stored frame: the first within
+    AUDIBLE_DB of the 90th percentile level (the follower's rule for the cue)."""
+    db = 20.0 * np.log10(np.asarray(stored, dtype=np.float64) + 1e-10)            # [dB]
+    loud = np.sort(db)[int(0.9 * (len(db) - 1))]
+    return float(np.flatnonzero(db >= loud - AUDIBLE_DB)[0]) * T
+
+
+def onset_of(played, audible_s: float) -> float:
+    """Live time [s] of the first tick whose truth has reached the taught
+    time audible_s [s]: where the deck's music starts."""
+    idx = np.flatnonzero(played.truth >= audible_s - 1e-9)
+    return float(idx[0]) * T if len(idx) else float("inf")
+
+
+def wrong_cue_later(cued: dict, unknown: dict) -> float:
+    """How much later [s] the cued run of a deck first locked correctly than
+    its unknown-start run: inf when only the cued run never did, 0 when
+    neither did."""
+    a, b = cued["lock_s"], unknown["lock_s"]
+    if np.isinf(a) and np.isinf(b):
+        return 0.0
+    return a - b
+
+
+def measure(track, played, ns=None, from_s: float = ACCURACY_FROM_S, onset_s: float | None = None) -> dict:
+    """Figures of one run (see the module docstring). from_s: accuracy is
+    measured on the ticks from this live time on [s]; onset_s: the music's
+    onset [s], given for the cue's figures (adds cue_lock_s)."""
     n = min(len(track.position), len(played.truth))
     pos = track.position[:n] * T                                 # [s]
     err = pos - played.truth[:n]                                 # [s]
@@ -148,7 +245,7 @@ def measure(track, played, ns=None) -> dict:
 
     good_lock = (state == LOCKED) & (np.abs(err) <= 0.2)
     lock_s = first(good_lock, 0.0)
-    sel = t >= ACCURACY_FROM_S
+    sel = t >= from_s
     for r in played.resumes:
         sel &= ~((t >= r) & (t < r + AFTER_PAUSE_S))
     for j in played.jumps:
@@ -157,9 +254,12 @@ def measure(track, played, ns=None) -> dict:
     relock_pause = [first((np.abs(err) <= 0.05) & (state != PAUSED), r) for r in played.resumes]
     entered = np.flatnonzero((state == LOCKED) & (np.concatenate([[-1], state[:-1]]) != LOCKED))
     false_locks = int(np.sum(np.abs(err[entered]) > FALSE_LOCK_S))
-    return {"errors": np.abs(err[sel]), "lock_s": lock_s, "relock_jump": relock_jump,
-            "relock_pause": relock_pause, "false_locks": false_locks,
-            "ns": ns[:n][sel] if ns is not None else np.zeros(0)}
+    out = {"errors": np.abs(err[sel]), "lock_s": lock_s, "relock_jump": relock_jump,
+           "relock_pause": relock_pause, "false_locks": false_locks,
+           "ns": ns[:n][sel] if ns is not None else np.zeros(0)}
+    if onset_s is not None:
+        out["cue_lock_s"] = first((state == LOCKED) & (np.abs(err) <= CUE_LOCK_TOL_S), onset_s)
+    return out
 
 
 def summarize(rows: list[dict]) -> dict:
@@ -174,7 +274,7 @@ def summarize(rows: list[dict]) -> dict:
         """Quantile of times that may be inf (never): an observed value, not interpolated."""
         return float(np.quantile(a, p, method="nearest")) if len(a) else float("nan")
 
-    return {
+    out = {
         "within20": float(np.mean(e <= 0.020)) if len(e) else float("nan"),
         "within50": float(np.mean(e <= 0.050)) if len(e) else float("nan"),
         "within200": float(np.mean(e <= 0.200)) if len(e) else float("nan"),
@@ -189,12 +289,21 @@ def summarize(rows: list[dict]) -> dict:
         "us_per_tick_median": q(ns, 0.5) / 1e3,
         "us_per_tick_p99": q(ns, 0.99) / 1e3,
     }
+    # the cue's figures, where the runs have them
+    for key in ("cue_lock_s", "later_s"):
+        values = [r[key] for r in rows if key in r]
+        if values:
+            out[f"{key}_max"] = max(values)
+            out[f"{key}_median"] = q_time(np.array(values), 0.5)
+    return out
 
 
-def check_targets(result: dict) -> list[tuple[str, float, bool]]:
+def check_targets(result: dict, targets=TARGETS) -> list[tuple[str, float, bool]]:
+    """(label, measured, met) per target; a figure missing from result (no
+    runs) counts as not met."""
     out = []
-    for key, op, bound in TARGETS:
-        v = result[key]
+    for key, op, bound in targets:
+        v = result.get(key, float("nan"))
         ok = bool(v >= bound) if op == ">=" else bool(v <= bound)
         out.append((f"{key} {op} {bound:g}", v, ok))
     return out
@@ -203,7 +312,10 @@ def check_targets(result: dict) -> list[tuple[str, float, bool]]:
 def run(seconds: float | None = None, quick: bool = False, seed: int = SEED, progress=None,
         seeds: int = SEEDS) -> list[dict]:
     """One result per mode (smooth, paper) with the documented keys, over
-    the scenarios of seeds seed, seed + 1, ... (seeds of them)."""
+    the scenarios of seeds seed, seed + 1, ... (seeds of them), then one
+    per set of the cue's runs (smooth mode): "cue at top", "top, unknown",
+    "wrong cue", "wrong cue, unknown". Each result says its "start"
+    ("unknown" for the first two)."""
     pieces = {}
     for style, s in (PIECES[:1] if quick else PIECES):
         piece = synthesize(style, seed=s)
@@ -212,39 +324,89 @@ def run(seconds: float | None = None, quick: bool = False, seed: int = SEED, pro
         pieces[style] = piece
     stored = {k: loudness(p.samples, p.sample_rate) for k, p in pieces.items()}
     stored_onsets = {k: onsets(p.samples, p.sample_rate) for k, p in pieces.items()}
+    audible_s = {k: audible_from(v) for k, v in stored.items()}             # [s]
     durations = {k: p.duration for k, p in pieces.items()}
-    runs = []
+    runs, wrong = [], []
     for s in range(seed, seed + seeds):
-        for sc in scenarios(durations, 20.0 if quick else seconds, quick, s):
-            if seeds > 1:
-                sc.name = f"{sc.name}@{s}"
-            runs.append(sc)
-    per_mode: dict[str, list] = {"smooth": [], "paper": []}
-    for sc in runs:
-        t0 = time.perf_counter()
+        cap = 20.0 if quick else seconds
+        for group, made in ((runs, scenarios(durations, cap, quick, s)),
+                            (wrong, wrong_cue_decks(durations, cap, quick, s))):
+            for sc in made:
+                if seeds > 1:
+                    sc.name = f"{sc.name}@{s}"
+                group.append(sc)
+
+    def live_of(sc):
         played = play(pieces[sc.piece].samples, pieces[sc.piece].sample_rate, sc.deck)
         live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
         live_onsets = sync_ticks(onsets(played.samples, played.sample_rate))[:len(played.truth)]
-        for mode in per_mode:
-            follower = Follower(stored[sc.piece], mode=mode, onset=stored_onsets[sc.piece])
-            track = follower.run(live, live_onsets, timing=True)
-            m = measure(track, played, track.ns)
-            m.update(name=sc.name, target=sc.target, speed=sc.deck.speed, snr_db=sc.deck.snr_db,
-                     seconds=len(played.truth) * T)
-            per_mode[mode].append(m)
+        return played, live, live_onsets
+
+    def follow(sc, live, live_onsets, mode="smooth", cue=None):
+        follower = Follower(stored[sc.piece], mode=mode, onset=stored_onsets[sc.piece])
+        if cue is not None:
+            follower.cue(cue)                                          # [stored ticks]
+        return follower.run(live, live_onsets, timing=True)
+
+    def row(m, sc, played):
+        m.update(name=sc.name, target=sc.target, speed=sc.deck.speed, snr_db=sc.deck.snr_db,
+                 start_s=sc.deck.start, seconds=len(played.truth) * T,
+                 events=bool(sc.deck.pauses or sc.deck.jump))
+        return m
+
+    def every_tick(m, track, played):
+        m["ns"] = track.ns[:min(len(track.ns), len(played.truth))]      # [ns] of every tick
+        return m
+
+    per_set: dict[tuple[str, str], list] = {(mode, start): [] for mode, start in (
+        ("smooth", "unknown"), ("paper", "unknown"), ("smooth", "cue at top"), ("smooth", "top, unknown"),
+        ("smooth", "wrong cue"), ("smooth", "wrong cue, unknown"))}
+    for sc in runs:
+        t0 = time.perf_counter()
+        played, live, live_onsets = live_of(sc)
+        for mode in ("smooth", "paper"):
+            track = follow(sc, live, live_onsets, mode)
+            per_set[mode, "unknown"].append(row(measure(track, played, track.ns), sc, played))
         if progress:
             progress(f"{sc.name}: {len(played.truth) * T:.0f} s of live audio, "
                      f"{time.perf_counter() - t0:.1f} s")
+    for sc in top_variants(runs):
+        t0 = time.perf_counter()
+        played, live, live_onsets = live_of(sc)
+        onset = onset_of(played, audible_s[sc.piece])                   # [s]
+        for start, cue in (("cue at top", 0.0), ("top, unknown", None)):
+            track = follow(sc, live, live_onsets, cue=cue)
+            m = measure(track, played, None, from_s=onset + CUE_FROM_S, onset_s=onset)
+            per_set["smooth", start].append(row(every_tick(m, track, played), sc, played))
+        if progress:
+            progress(f"{sc.name} from the top, cued and not: {len(played.truth) * T:.0f} s of live "
+                     f"audio, {time.perf_counter() - t0:.1f} s")
+    for sc in wrong:
+        t0 = time.perf_counter()
+        played, live, live_onsets = live_of(sc)
+        track = follow(sc, live, live_onsets, cue=0.0)
+        cued = every_tick(measure(track, played), track, played)
+        track = follow(sc, live, live_onsets)
+        unknown = every_tick(measure(track, played), track, played)
+        cued["later_s"] = wrong_cue_later(cued, unknown)
+        per_set["smooth", "wrong cue"].append(row(cued, sc, played))
+        per_set["smooth", "wrong cue, unknown"].append(row(unknown, sc, played))
+        if progress:
+            progress(f"{sc.name} from {sc.deck.start:.1f} s, cued at the top and not: "
+                     f"{len(played.truth) * T:.0f} s of live audio, {time.perf_counter() - t0:.1f} s")
     machine = machine_info()
+    targets_of = {"unknown": TARGETS, "cue at top": CUE_TARGETS, "wrong cue": WRONG_CUE_TARGETS}
     results = []
-    for mode, rows in per_mode.items():
-        res = {"mode": mode, **summarize([r for r in rows if r["target"]])}
+    for (mode, start), rows in per_set.items():
+        res = {"mode": mode, "start": start, **summarize([r for r in rows if r["target"]])}
         res["all_scenarios"] = summarize(rows)
+        # the target decks without a pause or a jump: what the cue alone does
+        res["no_events"] = summarize([r for r in rows if r["target"] and not r["events"]])
         res["scenarios"] = [{"name": r["name"], "target": r["target"], "speed": r["speed"],
-                             "snr_db": r["snr_db"], "seconds": r["seconds"], **summarize([r])}
-                            for r in rows]
+                             "snr_db": r["snr_db"], "start_s": r["start_s"], "seconds": r["seconds"],
+                             "events": r["events"], **summarize([r])} for r in rows]
         res["machine"] = machine
-        res["targets"] = {label: ok for label, _, ok in check_targets(res)}
+        res["targets"] = {label: ok for label, _, ok in check_targets(res, targets_of.get(start, ()))}
         results.append(res)
     return results
 
@@ -259,12 +421,13 @@ def format_table(results: list[dict]) -> str:
     if results:
         lines.append(describe(results[0]["machine"]))
     lines.append("")
+    unknown = [res for res in results if res.get("start", "unknown") == "unknown"]
     head = (f"{'scenario':<20} {'mode':<7} {'speed':>5} {'snr':>4} {'within20':>8} {'within50':>8} "
             f"{'within200':>9} {'med_ms':>7} {'p95_ms':>8} {'lock_s':>6} {'pause_s':>7} {'jump_s':>6} "
             f"{'false':>5}")
     lines.append(head)
     by_name = {}
-    for res in results:
+    for res in unknown:
         for row in res["scenarios"]:
             by_name.setdefault(row["name"], []).append((res["mode"], row))
     for name, rows in by_name.items():
@@ -278,7 +441,7 @@ def format_table(results: list[dict]) -> str:
     lines.append("")
     lines.append("summary over the target scenarios (|speed - 1| <= 6 %, SNR >= 20 dB); "
                  "[all]: every scenario, 10 dB SNR included")
-    for res in results:
+    for res in unknown:
         for label, s in (("", res), (" [all]", res["all_scenarios"])):
             lines.append(f"  {res['mode']:<6}{label:<6} within20 {s['within20']:.1%}  within50 "
                          f"{s['within50']:.1%}  within200 {s['within200']:.1%}  median "
@@ -289,16 +452,97 @@ def format_table(results: list[dict]) -> str:
                          f"{s['false_locks']}  us/tick median {s['us_per_tick_median']:.2f} "
                          f"p99 {s['us_per_tick_p99']:.2f}")
     lines.append("")
-    for res in results:
+    for res in unknown:
         if res["mode"] != "smooth":
             continue
         lines.append("targets (smooth mode; paper is the baseline beside it):")
-        failed = 0
-        for label, value, ok in check_targets(res):
-            failed += not ok
-            lines.append(f"  {label:<36} measured {value:>10.4g}   {'PASS' if ok else 'FAIL'}")
-        lines.append("all targets met" if not failed else f"{failed} target(s) FAILED")
+        lines += _target_lines(res, TARGETS)
+    by_set = {(res["mode"], res.get("start", "unknown")): res for res in results}
+    if ("smooth", "cue at top") in by_set:
+        lines.append("")
+        lines += _cue_lines(by_set)
     return "\n".join(lines)
+
+
+def _target_lines(res: dict, targets) -> list[str]:
+    lines, failed = [], 0
+    for label, value, ok in check_targets(res, targets):
+        failed += not ok
+        lines.append(f"  {label:<36} measured {value:>10.4g}   {'PASS' if ok else 'FAIL'}")
+    lines.append("all targets met" if not failed else f"{failed} target(s) FAILED")
+    return lines
+
+
+def _cue_lines(by_set: dict) -> list[str]:
+    """The cue's sections of the table: the top decks cued and not, the
+    wrong-cue decks cued and not, their summaries, the cost per tick and
+    the cue's targets. by_set: (mode, start) -> result."""
+    cue, top = by_set["smooth", "cue at top"], by_set["smooth", "top, unknown"]
+    wrong, wrong_unknown = by_set["smooth", "wrong cue"], by_set["smooth", "wrong cue, unknown"]
+    smooth = by_set.get(("smooth", "unknown"))
+    nan = float("nan")                  # a figure of no runs (no calm decks in --quick)
+    lines = [f"cue at the top (smooth mode): the scenarios above started at the top, cued at 0 "
+             f"(\"cue\") and from an unknown start (\"unknown\") on the same audio; accuracy on the "
+             f"ticks from {CUE_FROM_S:g} s after the music's onset; cue_lk_s: onset to the first tick "
+             f"LOCKED within {CUE_LOCK_TOL_S * 1e3:g} ms [s]; false: entries into LOCKED more than "
+             f"{FALSE_LOCK_S:g} s off", ""]
+    lines.append(f"{'scenario':<26} {'start':<7} {'speed':>5} {'snr':>4} {'within20':>8} {'within50':>8} "
+                 f"{'within200':>9} {'med_ms':>7} {'p95_ms':>8} {'cue_lk_s':>8} {'lock_s':>6} "
+                 f"{'pause_s':>7} {'jump_s':>6} {'false':>5}")
+    for a, b in zip(cue["scenarios"], top["scenarios"]):
+        for label, r in (("cue", a), ("unknown", b)):
+            lines.append(f"{r['name']:<26} {label:<7} {r['speed']:>5.2f} {_fmt(r['snr_db'], '>4.0f')} "
+                         f"{_fmt(r['within20'], '>8.1%')} {_fmt(r['within50'], '>8.1%')} "
+                         f"{_fmt(r['within200'], '>9.1%')} {_fmt(r['median_ms'], '>7.1f')} "
+                         f"{_fmt(r['p95_ms'], '>8.1f')} {_fmt(r['cue_lock_s_max'], '>8.2f')} "
+                         f"{_fmt(r['lock_s_max'], '>6.2f')} {_fmt(r['relock_after_pause_s_max'], '>7.2f')} "
+                         f"{_fmt(r['relock_after_jump_s_max'], '>6.2f')} {r['false_locks']:>5d}")
+    lines.append("")
+    lo, hi = WRONG_CUE_START_S                                             # [s]
+    lines.append(f"wrong cue (smooth mode): tapes started {lo:g}-{hi:g} s in, cued at the top and from "
+                 f"an unknown start; lock_s: start of the run to the first tick LOCKED within 200 ms [s]; "
+                 f"later_s: cued lock_s - unknown lock_s [s]; accuracy as in the scenarios above "
+                 f"(from {ACCURACY_FROM_S:g} s)")
+    lines.append("")
+    lines.append(f"{'scenario':<26} {'tape_s':>6} {'speed':>5} {'snr':>4} {'lock_s cue':>10} "
+                 f"{'lock_s unk':>10} {'later_s':>7} {'false cue':>9} {'false unk':>9} "
+                 f"{'within50 cue':>12} {'within50 unk':>12}")
+    for a, b in zip(wrong["scenarios"], wrong_unknown["scenarios"]):
+        lines.append(f"{a['name']:<26} {a['start_s']:>6.1f} {a['speed']:>5.2f} {_fmt(a['snr_db'], '>4.0f')} "
+                     f"{_fmt(a['lock_s_max'], '>10.2f')} {_fmt(b['lock_s_max'], '>10.2f')} "
+                     f"{_fmt(a['later_s_max'], '>7.2f')} {a['false_locks']:>9d} {b['false_locks']:>9d} "
+                     f"{_fmt(a['within50'], '>12.1%')} {_fmt(b['within50'], '>12.1%')}")
+    lines.append("")
+    lines.append("summary of the cue's runs over the target decks (|speed - 1| <= 6 %, SNR >= 20 dB); "
+                 "[calm]: those without a pause or a jump (fast, slow-room)")
+    for label, s in (("cue at top", cue), ("top, unknown", top),
+                     ("cue at top [calm]", cue["no_events"]), ("top, unknown [calm]", top["no_events"])):
+        lines.append(f"  {label:<20} within20 {s['within20']:.1%}  within50 {s['within50']:.1%}  "
+                     f"within200 {s['within200']:.1%}  cue lock median/max "
+                     f"{s.get('cue_lock_s_median', nan):.2f}/{s.get('cue_lock_s_max', nan):.2f} s  "
+                     f"lock median/max {s['lock_s_median']:.2f}/{s['lock_s_max']:.2f} s  "
+                     f"false locks {s['false_locks']}")
+    for label, s in (("wrong cue", wrong), ("wrong cue, unknown", wrong_unknown)):
+        later = (f"  later than unknown median/max {s['later_s_median']:.2f}/{s['later_s_max']:.2f} s"
+                 if "later_s_max" in s else "")
+        lines.append(f"  {label:<20} lock median/max {s['lock_s_median']:.2f}/{s['lock_s_max']:.2f} s"
+                     f"{later}  false locks {s['false_locks']}  within50 {s['within50']:.1%}")
+    lines.append("")
+    lines.append("cost per tick of the C step [us], median / p99, this run, this machine:")
+    if smooth is not None:
+        lines.append(f"  {f'unknown start, the scenarios above (ticks from {ACCURACY_FROM_S:g} s)':<54} "
+                     f"{smooth['us_per_tick_median']:6.2f} / {smooth['us_per_tick_p99']:6.2f}")
+    for label, s in (("top decks, unknown start (every tick)", top),
+                     ("top decks, cued at the top (every tick)", cue),
+                     ("wrong-cue decks, unknown start (every tick)", wrong_unknown),
+                     ("wrong-cue decks, cued at the top (every tick)", wrong)):
+        lines.append(f"  {label:<54} {s['us_per_tick_median']:6.2f} / {s['us_per_tick_p99']:6.2f}")
+    lines.append("")
+    lines.append("targets, cue at top (smooth mode, target decks):")
+    lines += _target_lines(cue, CUE_TARGETS)
+    lines.append("targets, wrong cue (smooth mode):")
+    lines += _target_lines(wrong, WRONG_CUE_TARGETS)
+    return lines
 
 
 def main(argv=None) -> int:
@@ -306,11 +550,15 @@ def main(argv=None) -> int:
         prog="marionette bench sync",
         description="Music following against ground truth: synthesized pieces played through a "
                     "simulated tape deck, smooth and paper mode side by side.")
-    parser.add_argument("--json", action="store_true", help="print a JSON list (one object per mode)")
+    parser.add_argument("--json", action="store_true",
+                        help="print a JSON list (one object per mode, then one per set of the cue's runs)")
+    parser.add_argument("--strict", action="store_true",
+                        help="exit with status 1 if a target fails (smooth mode, the cue's included)")
     parser.add_argument("--seconds", type=float, default=None, metavar="S",
                         help="cap each live recording at S seconds (default: to the piece's end)")
     parser.add_argument("--quick", action="store_true",
-                        help="one short piece, two scenarios (smoke test; figures meaningless)")
+                        help="one short piece, two scenarios, their top variants and one wrong-cue "
+                             "deck (smoke test; figures meaningless)")
     parser.add_argument("--seed", type=int, default=SEED, help="seed of the first set of scenarios")
     parser.add_argument("--seeds", type=int, default=SEEDS, metavar="N",
                         help=f"sets of scenarios, seeds SEED to SEED + N - 1 (default {SEEDS}): "
@@ -327,7 +575,8 @@ def main(argv=None) -> int:
         sys.stdout.write("\n")
     else:
         print(format_table(results))
-    return 0
+    failed = any(not ok for res in results if res["mode"] == "smooth" for ok in res["targets"].values())
+    return 1 if args.strict and failed else 0
 
 
 if __name__ == "__main__":
