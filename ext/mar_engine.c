@@ -26,6 +26,10 @@ struct mar_engine {
     uint32_t follow_flags;          /* MAR_FOLLOW_F_* of this tick's follower steps */
     mar_follow *follow;             /* NULL: the rate drives the playback clock */
     mar_follow_out follow_out;
+    int had_place;                  /* a tick ended with the follower not SEARCHING: it knew a place */
+    int unfollowed;                 /* this tick: SEARCHING after it had a place (MAR_FLAG_UNFOLLOWED) */
+    int rejoin;                     /* this tick: following again after a hold (MAR_ON_LOST_HOLD) */
+    double held_at;                 /* on hold: the position when following was lost [show ticks] */
     int64_t tick;
     uint64_t bad_input_seen;        /* bad_input at the previous tick */
     int mode;                       /* enum mar_mode */
@@ -91,6 +95,8 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
     if (opt->lead_mode < MAR_LEAD_NONE || opt->lead_mode > MAR_LEAD_DEAD_TIME_LAG)
         return NULL;
     if (opt->interp != MAR_INTERP_LINEAR && opt->interp != MAR_INTERP_CUBIC)
+        return NULL;
+    if (opt->follow && opt->follow_on_lost != MAR_ON_LOST_FLYWHEEL && opt->follow_on_lost != MAR_ON_LOST_HOLD)
         return NULL;
     for (size_t j = 0; j < n_axes; j++) {
         int r = check_axis(&axes[j]);
@@ -209,7 +215,14 @@ static double newest_live_loudness(mar_engine *e)
  * (mar_follow_tick) on the frames that came, as every offline tool runs it.
  * Frames beyond MAR_FOLLOW_TICK_FRAMES wait in the ring for the next tick,
  * so a burst drains instead of adding latency. Returns the newest frame
- * taken, NaN if none. */
+ * taken, NaN if none.
+ *
+ * The music is not followed while the follower searches after it had a
+ * place. Its own position then runs on at its last rate (its flywheel; from
+ * an unknown start it has no place and stands still at rate 0). With
+ * MAR_ON_LOST_HOLD the show does not play on: the position stays where the
+ * previous tick had it, rate 0, and when the follower has a place again the
+ * tick blends there (e->rejoin), whether or not it flagged a jump. */
 static double follow_music(mar_engine *e, int64_t elapsed_periods, int seek, double seek_to)
 {
     mar_follow_frame frames[MAR_FOLLOW_TICK_FRAMES];
@@ -217,9 +230,23 @@ static double follow_music(mar_engine *e, int64_t elapsed_periods, int seek, dou
         mar_follow_reset(e->follow, seek_to);
     size_t n = mar_ring_pop(&e->loudness_in, frames, MAR_FOLLOW_TICK_FRAMES);
     mar_follow_tick(e->follow, frames, n, elapsed_periods, &e->follow_out);
+    int hold = e->opt.follow_on_lost == MAR_ON_LOST_HOLD;
+    int was_unfollowed = e->unfollowed;
+    int searching = e->follow_out.state == MAR_FOLLOW_SEARCHING;
+    if (searching && e->had_place && !was_unfollowed)
+        e->held_at = e->position;       /* the last followed tick's position */
+    e->unfollowed = searching && e->had_place;
+    e->rejoin = hold && was_unfollowed && !e->unfollowed;
+    if (!searching)
+        e->had_place = 1;
     e->follow_flags = e->follow_out.flags;
-    e->position = e->follow_out.position;
-    e->rate = e->follow_out.rate;
+    if (hold && e->unfollowed) {
+        e->position = e->held_at;
+        e->rate = 0.0;
+    } else {
+        e->position = e->follow_out.position;
+        e->rate = e->follow_out.rate;
+    }
     return n > 0 ? frames[n - 1].loudness : NAN;
 }
 
@@ -325,9 +352,10 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         flags |= MAR_FLAG_BAD_INPUT;
     }
     take_request(e);
-    if (e->follow && (e->follow_flags & MAR_FOLLOW_F_JUMP) && e->mode == MAR_MODE_SHOW) {
-        /* the music's position jumped (lock, re-lock, resume): a timed blend
-         * to where the music will be when the figure arrives, not a slew */
+    if (e->follow && ((e->follow_flags & MAR_FOLLOW_F_JUMP) || e->rejoin) && e->mode == MAR_MODE_SHOW) {
+        /* the music's position jumped (lock, re-lock, resume, or the end of
+         * a hold while it was not followed): a timed blend to where the
+         * music will be when the figure arrives, not a slew */
         plan_moves(e, MAR_REQ_BLEND, 1, e->position);
         double arrive = e->position + e->rate * e->move_duration / T;
         plan_moves(e, MAR_REQ_BLEND, 1, arrive < last ? arrive : last);
@@ -353,6 +381,8 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     }
     if (limited)
         flags |= MAR_FLAG_LIMITED;
+    if (e->follow && e->unfollowed)
+        flags |= MAR_FLAG_UNFOLLOWED;
     e->was_playing = e->mode == MAR_MODE_SHOW;
     flags |= e->mode == MAR_MODE_MOVE ? MAR_FLAG_MOVING : e->mode == MAR_MODE_HOLD ? MAR_FLAG_HOLDING : 0u;
     if (e->mode == MAR_MODE_MOVE && e->move_time >= e->move_duration)  /* arrived: next tick */

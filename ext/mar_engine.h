@@ -25,6 +25,14 @@ enum mar_lead_mode {
     MAR_LEAD_DEAD_TIME_LAG = 2, /* x(t + Td) + tau * x'(t + Td): inverts dead time + first-order lag */
 };
 
+/* What the show does while the music is not followed: the follower is
+ * SEARCHING after it had a place (a tick of its in another state). */
+enum mar_on_lost {
+    MAR_ON_LOST_FLYWHEEL = 0,   /* play on at the follower's position and rate: its flywheel, the last rate */
+    MAR_ON_LOST_HOLD = 1,       /* hold the position where following was lost, rate 0, until the
+                                 * follower has a place again; then blend there */
+};
+
 /* One axis: behaviour model, limits, addressing. */
 typedef struct {
     mar_limits limits;
@@ -44,6 +52,7 @@ typedef struct {
     int follow;                 /* 1: the live music's follower drives position and rate (mar_follow.h) */
     mar_follow_options follow_opt;  /* used when follow is 1 */
     double follow_cue;          /* where the live music starts [show ticks] (mar_follow_cue); NaN: unknown */
+    int follow_on_lost;         /* enum mar_on_lost, used when follow is 1 (0: flywheel) */
 } mar_engine_options;
 
 /* Who drives the commands. */
@@ -66,6 +75,7 @@ enum mar_request {
 #define MAR_FLAG_BAD_INPUT 4u   /* a non-finite rate, seek or loudness was refused */
 #define MAR_FLAG_MOVING    8u   /* online moves drive the commands */
 #define MAR_FLAG_HOLDING  16u   /* the figure holds a pose */
+#define MAR_FLAG_UNFOLLOWED 32u /* the music is not followed: the follower searches after it had a place */
 
 /* A flight-recorder record, followed in memory by n_axes commands [unit]. */
 typedef struct {

@@ -79,6 +79,7 @@ cdef extern from "mar_engine.h" nogil:
         int follow
         mar_follow_options follow_opt
         double follow_cue
+        int follow_on_lost
     ctypedef struct mar_record:
         int64_t tick
         int64_t time_ns

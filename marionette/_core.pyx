@@ -32,6 +32,9 @@ FLAG_END = 2
 FLAG_BAD_INPUT = 4
 FLAG_MOVING = 8
 FLAG_HOLDING = 16
+FLAG_UNFOLLOWED = 32    # the music is not followed: the follower searches after it had a place
+ON_LOST_FLYWHEEL = 0    # enum mar_on_lost
+ON_LOST_HOLD = 1
 REQUEST_GOTO = 1        # enum mar_request
 REQUEST_BLEND = 2
 REQUEST_STOP = 3
@@ -71,11 +74,14 @@ cdef class CoreEngine:
                   cnp.ndarray[cnp.float64_t, ndim=2, mode="c"] show,
                   cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] loudness,
                   size_t record_slots, size_t loudness_slots, bint start_holding=False,
-                  bytes follow_options=None, onsets=None, double follow_cue=NAN):
+                  bytes follow_options=None, onsets=None, double follow_cue=NAN,
+                  int follow_on_lost=ON_LOST_FLYWHEEL):
         """follow_options: a filled mar_follow_options (marionette._follow.options_bytes),
         or None to let the rate drive the playback clock; onsets: the stored
         onset strength (ticks,) [dB] for the follower, or None; follow_cue:
-        where the live music starts [show ticks], NaN: unknown."""
+        where the live music starts [show ticks], NaN: unknown; follow_on_lost:
+        ON_LOST_FLYWHEEL or ON_LOST_HOLD, what the show does while the music is
+        not followed."""
         axes = np.ascontiguousarray(axes, dtype=AXIS_DTYPE)
         cdef size_t n_axes = axes.shape[0]
         if show.shape[0] != n_axes or loudness.shape[0] != show.shape[1]:
@@ -111,6 +117,7 @@ cdef class CoreEngine:
         opt.start_holding = start_holding
         opt.follow = follow_options is not None
         opt.follow_cue = follow_cue
+        opt.follow_on_lost = follow_on_lost
         if opt.follow:
             if len(follow_options) != sizeof(mar_follow_options):
                 free(c_axes)

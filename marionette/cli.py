@@ -12,6 +12,7 @@ import os
 import sys
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -22,6 +23,9 @@ from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
 from marionette.follow import sync_ticks
 from marionette.show import LIMIT_POLICIES, load_show
+from marionette.show_report import (LostWatcher, choose_latency, follow_share, lost_events,
+                                    never_locked_warning, recording_warnings, share_line,
+                                    verdict_line)
 
 BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync")
 # commands that live in their own modules (marionette/cmd_<name>.py, each with
@@ -62,42 +66,66 @@ def _feed_in_real_time(engine, frames, period: float, stop: threading.Event) -> 
         engine.push_loudness(float(value), float(onset))
 
 
+def _open_audio(args, engine_box: list):
+    """The sound card source, started before the engine so that its input
+    latency is known when the engine is made; frames go to the engine in
+    engine_box once there is one (until then they are dropped)."""
+    from marionette.live_audio import LiveLoudness
+    audio = None
+
+    def to_engine(value: float, onset: float) -> None:
+        if engine_box:
+            engine_box[0].push_loudness(value, onset)
+
+    def audio_lost(reason: str) -> None:      # at once, from the source's watchdog
+        print(f"audio input {audio.name!r} lost: {reason}", file=sys.stderr, flush=True)
+
+    # the index comes as a string: the source takes digits as an index
+    audio = LiveLoudness(to_engine, device=args.audio_device or None, onsets=True, on_lost=audio_lost)
+    return audio.start()
+
+
 def cmd_play(args) -> int:
     config, show = _figure_and_show(args)
+    period = config.tick_period                                         # [s]
     output = None
     if args.output and args.link:
         raise MarionetteError("give --output or --link, not both")
+    live = _live_frames(args, config)
+    n = args.ticks if args.ticks is not None else show.n_ticks
+    follow = args.follow or (True if (live is not None or args.audio_device is not None) else None)
+    if live is not None:        # said before the show, which goes on regardless
+        for line in recording_warnings(args.music, live[0], period, show.duration, args.start):
+            print(line, file=sys.stderr, flush=True)
     if args.output:
         output = os.open(args.output, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
     elif args.link:
         from marionette.transport import open_link
         output = open_link(args.link)
-    live = _live_frames(args, config)
-    n = args.ticks if args.ticks is not None else show.n_ticks
-    follow = args.follow or (True if (live is not None or args.audio_device is not None) else None)
-    audio, stop_feed = None, threading.Event()
+    audio, stop_feed, watcher, engine_box = None, threading.Event(), None, []
+    on_lost = config.follow.on_lost
     try:
+        if args.audio_device is not None:
+            audio = _open_audio(args, engine_box)
+        latency, latency_from = choose_latency(config.follow.latency,
+                                               audio.latency if audio is not None else None)
+        config = replace(config, follow=replace(config.follow, latency=latency))
         with Engine(config, show, lead=args.lead, interpolation=args.interpolation,
                     output=output, record=args.record or True, rate=args.rate,
                     follow=follow, follow_start=args.start) as engine:
-            if args.audio_device is not None:
-                from marionette.live_audio import LiveLoudness
-
-                def audio_lost(reason: str) -> None:      # at once, from the source's watchdog
-                    print(f"audio input {audio.name!r} lost: {reason}", file=sys.stderr, flush=True)
-
-                # the index comes as a string: the source takes digits as an index
-                audio = LiveLoudness(engine.push_loudness, device=args.audio_device or None,
-                                     onsets=True, on_lost=audio_lost)
-                audio.start()
+            engine_box.append(engine)
             if args.realtime:
                 engine.start(priority=args.priority, cpu=args.cpu, lock_memory=args.lock_memory,
                              max_ticks=n)
+                if follow:
+                    watcher = LostWatcher(engine, period, on_lost).start()
                 if live is not None:
                     threading.Thread(target=_feed_in_real_time, daemon=True,
-                                     args=(engine, live, config.tick_period, stop_feed)).start()
+                                     args=(engine, live, period, stop_feed)).start()
                 engine.wait()
                 engine.stop()
+                if watcher is not None:
+                    watcher.stop()
             elif live is not None:       # tick k has heard frame k - 1, as in sync-sim
                 loud, onset = (sync_ticks(x) for x in live)
                 for k in range(n):
@@ -111,15 +139,25 @@ def cmd_play(args) -> int:
             nodes = engine.nodes.summary() if engine.nodes is not None else None
     finally:
         stop_feed.set()
+        if watcher is not None:
+            watcher.stop()
         if audio is not None:
             audio.stop()
         if isinstance(output, int):
             os.close(output)
         elif output is not None:
             output.close()
+    share = follow_share(records) if follow else None
+    if follow and not args.realtime:     # the lines a real-time run prints as it happens
+        for line in lost_events(records["flags"], records["position"], period, on_lost):
+            print(line, file=sys.stderr)
+    if share is not None and live is not None:      # a recording of another piece (or none)
+        line = never_locked_warning(args.music, share)
+        if line:
+            print(line, file=sys.stderr, flush=True)
     mode = "real time" if args.realtime else "step mode"
     print(f"played {show.path} on {config.name} in {mode}: {stats['ticks']} ticks "
-          f"({stats['ticks'] * config.tick_period:.2f} s of show), lead {args.lead}, "
+          f"({stats['ticks'] * period:.2f} s of show), lead {args.lead}, "
           f"{args.interpolation} interpolation, rate {args.rate:g}")
     for change in show.changes:
         print(f"  show changed: {change}")
@@ -137,11 +175,12 @@ def cmd_play(args) -> int:
                   + (", SILENT" if s["silent"] else ""))
     if follow:
         states = records["follow_state"]
-        share = ", ".join(f"{name} {np.mean(states == code):.0%}"
-                          for code, name in FOLLOW_STATES.items())
-        print(f"  music follower ({args.follow or config.follow.mode}): {share}; "
+        shares = ", ".join(f"{name} {np.mean(states == code):.0%}"
+                           for code, name in FOLLOW_STATES.items())
+        print(f"  music follower ({args.follow or config.follow.mode}): {shares}; "
               f"position at the end {records['position'][-1]:.1f} ticks, "
-              f"rate {records['rate'][-1]:.3f}")
+              f"rate {records['rate'][-1]:.3f}; input latency {latency * 1e3:.0f} ms ({latency_from})")
+        print(share_line(share, period, on_lost))
     c = stats["compute"]
     print(f"  tick compute [us]: p50 {c['p50_us']:.2f}  p99 {c['p99_us']:.2f}  "
           f"p99.9 {c['p999_us']:.2f}  max {c['max_us']:.2f}")
@@ -152,17 +191,22 @@ def cmd_play(args) -> int:
     cmd = records["command"]
     print(f"  {'axis':<18}{'unit':>5}{'min':>10}{'max':>10}{'top speed':>11}{'limit':>9}")
     for j, axis in enumerate(config.axes):
-        speed = np.max(np.abs(np.diff(cmd[:, j]))) / config.tick_period if len(cmd) > 1 else 0.0
+        speed = np.max(np.abs(np.diff(cmd[:, j]))) / period if len(cmd) > 1 else 0.0
         print(f"  {axis.name:<18}{axis.unit:>5}{cmd[:, j].min():>10.4f}{cmd[:, j].max():>10.4f}"
               f"{speed:>11.4f}{axis.max_speed:>9.3g}")
+    status = 0
     if audio is not None:
-        latency = "-" if audio.latency is None else f"{audio.latency * 1e3:.0f} ms"
-        print(f"  audio input {audio.name!r}: {audio.frames} frames, input latency {latency}, "
+        audio_latency = "-" if audio.latency is None else f"{audio.latency * 1e3:.0f} ms"
+        print(f"  audio input {audio.name!r}: {audio.frames} frames, input latency {audio_latency}, "
               f"{audio.overflows} overflows"
               + (f"; LOST: {audio.lost_reason}" if audio.lost_reason is not None else ""))
         if audio.lost_reason is not None:
-            return 1
-    return 0
+            status = 1
+    verdict = verdict_line(share) if share is not None else None
+    if verdict:
+        print(verdict)
+        status = 1
+    return status
 
 
 def cmd_shape(args) -> int:
@@ -210,7 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--follow", choices=("smooth", "paper"),
                    help="follow the live music (default mode with --music or --audio-device: "
                         "the figure's [follow] table)")
-    p.add_argument("--music", help="the live music from this recording, played back as if live")
+    p.add_argument("--music", help="the live music from this recording, played back as if live "
+                                   "(a silent or short one, or one never locked on, is warned about)")
     add_start_argument(p)
     p.add_argument("--audio-device", nargs="?", const="",
                    help="the live music from this sound card input (its index or a part of its "

@@ -51,6 +51,7 @@ class AxisConfig:
 
 
 FOLLOW_MODES = ("smooth", "paper")
+ON_LOST = ("flywheel", "hold")      # what the show does while the music is not followed
 
 
 @dataclass(frozen=True)
@@ -62,7 +63,8 @@ class FollowConfig:
     mode: str = "smooth"            # "smooth" (fractional rate) or "paper" (double or skip a sample)
     rate_min: float = 0.90          # slowest playback rate [1]
     rate_max: float = 1.10          # fastest playback rate [1]
-    latency: float = 0.0            # from the end of the newest loudness frame's audio to the tick [s]
+    latency: float | None = None    # from the end of the newest loudness frame's audio to the tick [s];
+                                    # None: not set (0, or a sound card's own input latency)
     window: float = 4.0             # tracking correlation window [s]
     lock_threshold: float = 0.6     # correlation a place needs to lock [1]
     lock_margin: float = 0.3        # its lead over any other place [Fisher z]
@@ -70,6 +72,8 @@ class FollowConfig:
     pause_after: float = 0.16       # silence where music is expected before a pause [s]
     search_budget: int = 512        # search candidates scored per tick [1]
     range_db: float = 25.0          # loudness range below the running peak that counts [dB]
+    on_lost: str = "flywheel"       # while the music is not followed: play on at the last rate
+                                    # ("flywheel") or hold the place where it was lost ("hold")
 
 
 @dataclass(frozen=True)
@@ -184,6 +188,11 @@ def _follow(src: str, table) -> FollowConfig:
             raise ConfigError(f"{src}: follow.mode = {table['mode']!r} is not a known mode "
                               f"(use one of {FOLLOW_MODES})")
         values["mode"] = table["mode"]
+    if "on_lost" in table:
+        if table["on_lost"] not in ON_LOST:
+            raise ConfigError(f"{src}: follow.on_lost = {table['on_lost']!r} is not known "
+                              f"(use one of {ON_LOST})")
+        values["on_lost"] = table["on_lost"]
     if "search_budget" in table:
         values["search_budget"] = _integer(src, "follow.search_budget", table["search_budget"], 1, 100000)
     for key, (lo, hi) in _FOLLOW_RANGES.items():

@@ -34,6 +34,7 @@ LEAD_MODES = {"dead_time_lag": _core.LEAD_DEAD_TIME_LAG, "mean_delay": _core.LEA
               "none": _core.LEAD_NONE}
 INTERPOLATIONS = {"cubic": _core.INTERP_CUBIC, "linear": _core.INTERP_LINEAR}
 PROTOCOLS = {"serial": _core.PROTOCOL_SERIAL, "can": _core.PROTOCOL_CAN}
+ON_LOST = {"flywheel": _core.ON_LOST_FLYWHEEL, "hold": _core.ON_LOST_HOLD}   # [follow] on_lost
 CAN_COUNTS_MAX = 524287  # int20 counts of a CAN setpoint PDO (firmware_protocol/SPEC.md)
 FOLLOW_STATES = dict(enumerate(_FOLLOW_STATE_NAMES))   # record follow_state -> name
 RECORD_SLOTS = 4096      # flight-recorder ring [ticks], 82 s at 20 ms
@@ -98,17 +99,25 @@ class Engine:
     show waits there through the silence before the music and plays from
     the music's onset (mar_follow_cue); None (default until the gaps in
     docs/music.md are closed): unknown, the follower searches the whole piece.
+    on_lost: what the show does while the music is not followed (the
+    follower searches after it had a place; the records' FLAG_UNFOLLOWED):
+    "flywheel" (play on at the last rate) or "hold" (stand at the place
+    where it was lost, then blend back in); None: the figure's [follow] on_lost.
     """
 
     def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
                  interpolation: str = "cubic", output=None, protocol: str | None = None,
                  record=None, rate: float = 1.0, on_limits: str = "error", start_pose=None,
-                 follow: str | None = None, poll: str = "all", follow_start: float | None = None):
+                 follow: str | None = None, poll: str = "all", follow_start: float | None = None,
+                 on_lost: str | None = None):
         if lead not in LEAD_MODES:
             raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
         if interpolation not in INTERPOLATIONS:
             raise ValueError(f"interpolation must be one of {sorted(INTERPOLATIONS)}, "
                              f"not {interpolation!r}")
+        on_lost = config.follow.on_lost if on_lost is None else on_lost
+        if on_lost not in ON_LOST:
+            raise ValueError(f"on_lost must be one of {sorted(ON_LOST)}, not {on_lost!r}")
         protocol = protocol or getattr(output, "protocol", "serial")
         if protocol not in PROTOCOLS:
             raise ValueError(f"protocol must be one of {sorted(PROTOCOLS)}, not {protocol!r}")
@@ -126,7 +135,7 @@ class Engine:
             np.ascontiguousarray(self.show.loudness, dtype=np.float64),
             RECORD_SLOTS if record else 0, LOUDNESS_SLOTS, start_pose is not None,
             None if follow is None else follower_options(config, self.show, follow),
-            self.show.onsets if follow is not None else None, cue)
+            self.show.onsets if follow is not None else None, cue, ON_LOST[on_lost])
         self._request_lock = threading.Lock()
         self.recorder = None
         if record:

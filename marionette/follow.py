@@ -61,7 +61,8 @@ def c_options(settings: FollowConfig | None = None, period: float = 0.020, **ove
         raise FollowError(f"tick period {period!r} s must be > 0")
     opt = _follow.default_options()
     ticks = lambda seconds: seconds / period                      # noqa: E731 [s] -> [ticks]
-    opt.update(mode=s.mode, rate_min=s.rate_min, rate_max=s.rate_max, delay=ticks(s.latency),
+    latency = 0.0 if s.latency is None else s.latency          # [s]; None: not set
+    opt.update(mode=s.mode, rate_min=s.rate_min, rate_max=s.rate_max, delay=ticks(latency),
                lock_threshold=s.lock_threshold, lock_margin=s.lock_margin,
                lost_after=ticks(s.lost_after), pause_after=max(1.0, ticks(s.pause_after)),
                search_budget=s.search_budget, range_db=s.range_db)

@@ -39,7 +39,10 @@ def tape(samples, rate, deck, path):
 def assert_same_track(show, live, tmp_path):
     record = tmp_path / "flight.bin"
     result = run_cli("play", show, "--music", live, "--record", record)
-    assert result.returncode == 0, result.stderr
+    # a recording shorter than half the show leaves most of it unfollowed:
+    # play then exits 1 and says so last (docs/music.md, on_lost)
+    assert result.returncode == 0 or (result.returncode == 1 and result.stdout.splitlines()[-1]
+                                      .startswith("NOT FOLLOWED")), result.stderr
     _, rec = read_flight_record(record)
     track, _, _ = simulate(show, live, config=load_config(None))
     n = len(rec)

@@ -42,7 +42,8 @@ static void test_limits_random(int cases)
             loud[k] = uniform(0, 1);
         mar_engine_options opt = { .period = 0.02, .lead_mode = c % 3, .interp = c % 2,
                                    .record_slots = TICKS, .loudness_slots = 16,
-                                   .start_holding = c % 5 == 0, .follow = c % 4 == 3 };
+                                   .start_holding = c % 5 == 0, .follow = c % 4 == 3,
+                                   .follow_on_lost = c % 8 == 3 ? MAR_ON_LOST_HOLD : MAR_ON_LOST_FLYWHEEL };
         mar_follow_default_options(&opt.follow_opt);   /* the music drives p and r in every 4th case */
         int status;
         /* every 8th case follows with onsets (the loudness stands in for them) */
@@ -265,6 +266,91 @@ static void test_sink(void)
     mar_engine_destroy(e);
 }
 
+/* The music lost: the live frames follow the stored loudness from a known
+ * start (a seek), then turn to noise that matches no place, so the follower
+ * ends up SEARCHING after it had a place. MAR_FLAG_UNFOLLOWED marks exactly
+ * those ticks; with MAR_ON_LOST_HOLD the position stands where the last
+ * followed tick had it (rate 0), with the flywheel it runs on at the last
+ * rate; a seek gives the follower a place again, and after a hold the
+ * figure blends there (MAR_FLAG_MOVING). No tick allocates. */
+static void test_on_lost(void)
+{
+    enum { TICKS = 3000, FOLLOWED = 600, NOISE = 600, AFTER = 100 };
+    static double show[TICKS], loud[TICKS];
+    double level = 0.0;
+    for (int k = 0; k < TICKS; k++) {          /* a wandering level with notes on it [full scale] */
+        level = 0.98 * level + uniform(-1.0, 1.0);
+        loud[k] = 0.01 * pow(10.0, (2.0 * level + (k % 25 < 4 ? 15.0 : 0.0)) / 20.0);
+        show[k] = 0.5 * sin(6.283185307179586 * k / 300.0);   /* a 6 s sine [unit] */
+    }
+    mar_axis axis = { .limits = { -1, 1, 5, 100 }, .start = show[500], .address = { 1, 0, 100, 0 } };
+    for (int hold = 0; hold <= 1; hold++) {
+        mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
+                                   .record_slots = 2048, .loudness_slots = 16, .follow = 1,
+                                   .follow_cue = NAN,
+                                   .follow_on_lost = hold ? MAR_ON_LOST_HOLD : MAR_ON_LOST_FLYWHEEL };
+        mar_follow_default_options(&opt.follow_opt);
+        int status;
+        mar_engine *e = mar_engine_create(&opt, &axis, 1, show, TICKS, loud, NULL, &status);
+        CHECK(e != NULL, "create: %d", status);
+        if (!e)
+            return;
+        size_t rs = mar_engine_record_size(e);
+        unsigned char *buf = malloc(rs * 2048);
+        long before = allocations;
+        mar_engine_step(e, 20);                 /* no music yet: searching, no place, not unfollowed */
+        mar_engine_seek(e, 500.0);
+        for (int k = 0; k < FOLLOWED + NOISE; k++) {
+            mar_engine_push_loudness(e, k < FOLLOWED ? loud[500 + k] : 0.01 * pow(10.0, uniform(-1.0, 1.0)));
+            mar_engine_step(e, 1);
+        }
+        mar_engine_seek(e, 2000.0);
+        for (int k = 0; k < AFTER; k++) {
+            mar_engine_push_loudness(e, loud[2000 + k]);
+            mar_engine_step(e, 1);
+        }
+        CHECK(allocations == before, "on_lost %d: ticks allocated %ld times", hold, allocations - before);
+        size_t n = mar_engine_drain_records(e, buf, 2048);
+        CHECK(n == 20 + FOLLOWED + NOISE + AFTER, "recorded %zu", n);
+        int had_place = 0, lost = 0, first_lost = -1, rejoined = -1;
+        mar_record prev = { 0 };
+        for (size_t i = 0; i < n; i++) {
+            mar_record r;
+            memcpy(&r, buf + i * rs, sizeof r);
+            int unfollowed = had_place && r.follow_state == MAR_FOLLOW_SEARCHING;
+            CHECK(!!(r.flags & MAR_FLAG_UNFOLLOWED) == unfollowed, "on_lost %d tick %zu: flags 0x%x, state %d",
+                  hold, i, r.flags, r.follow_state);
+            if (unfollowed) {
+                if (first_lost < 0)
+                    first_lost = (int)i;
+                lost++;
+                if (hold)
+                    CHECK(r.position == prev.position && r.rate == 0.0, "on_lost hold tick %zu: p %g (was %g), r %g",
+                          i, r.position, prev.position, r.rate);
+                else if (first_lost < (int)i)   /* the last rate, and not standing still */
+                    CHECK(fabs(r.position - prev.position - prev.rate) < 1e-9 && r.rate == prev.rate
+                          && r.rate > 0.5, "on_lost flywheel tick %zu: p %g (was %g), r %g (was %g)",
+                          i, r.position, prev.position, r.rate, prev.rate);
+            } else if (prev.flags & MAR_FLAG_UNFOLLOWED && rejoined < 0) {
+                rejoined = (int)i;
+                if (hold)
+                    CHECK(r.flags & MAR_FLAG_MOVING, "on_lost hold: no blend back in at tick %zu", i);
+            }
+            had_place |= r.follow_state != MAR_FOLLOW_SEARCHING;
+            prev = r;
+        }
+        CHECK(lost > 50 && first_lost > 20 + FOLLOWED, "on_lost %d: %d ticks unfollowed from %d", hold, lost, first_lost);
+        CHECK(rejoined == 20 + FOLLOWED + NOISE, "on_lost %d: followed again at tick %d", hold, rejoined);
+        free(buf);
+        mar_engine_destroy(e);
+    }
+    mar_engine_options bad = { .period = 0.02, .loudness_slots = 4, .follow = 1, .follow_on_lost = 2 };
+    mar_follow_default_options(&bad.follow_opt);
+    int status;
+    CHECK(mar_engine_create(&bad, &axis, 1, show, TICKS, loud, NULL, &status) == NULL && status == -22,
+          "unknown on_lost accepted");
+}
+
 static void test_ring_and_hist(void)
 {
     mar_ring r;
@@ -326,6 +412,7 @@ int main(void)
     test_limits_random(300);
     test_bad_inputs();
     test_sink();
+    test_on_lost();
     test_ring_and_hist();
     test_rtloop();
     if (failures) {

@@ -102,7 +102,9 @@ def test_frames_arrive_at_50_hz_and_the_latency_is_reported(pulse, music, monkey
 
 def test_the_show_follows_music_from_the_sound_card(pulse, music, tmp_path):
     wav, show = music
-    ticks = 600                                                     # 12 s
+    # 20 s: a first lock within LOCK_WITHIN of the first frame (up to 2 s late)
+    # keeps the searching share under half, which would make play exit 1
+    ticks = 1000
     flight = tmp_path / "flight.bin"
     player = play_into_sink(wav)
     started = time.monotonic()                      # the music starts about now [s]
@@ -116,6 +118,7 @@ def test_the_show_follows_music_from_the_sound_card(pulse, music, tmp_path):
     assert proc.returncode == 0, err
     assert err == "", err
     assert f"audio input 'pulse': " in out and "LOST" not in out, out
+    assert "(the sound card's input latency)" in out, out
     _, rec = read_flight_record(flight)
     t = rec["time_ns"] * 1e-9 - started             # CLOCK_MONOTONIC, as time.monotonic() [s]
     live = rec["live_loudness"]
@@ -130,7 +133,8 @@ def test_the_show_follows_music_from_the_sound_card(pulse, music, tmp_path):
     after = locked[locked > locked[0] + 50]         # a second after the lock
     assert len(after) > 0.9 * (ticks - locked[0] - 50), len(after)    # and it stays locked
     # the position is the music's time since paplay began, less paplay's
-    # own start-up (measured 0 to 55 ms) and the uncorrected input latency
+    # own start-up (measured 0 to 55 ms); the input latency is corrected:
+    # the figure leaves [follow] latency out, so play takes the stream's
     err = rec["position"][after] * T - t[after]     # [s]
     assert -0.15 < np.median(err) < 0.05, np.median(err)
     assert np.percentile(err, 95) - np.percentile(err, 5) < 0.06, np.percentile(err, [5, 95])
