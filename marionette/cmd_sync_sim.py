@@ -34,7 +34,7 @@ import numpy as np
 
 from marionette.config import FOLLOW_MODES, load_config
 from marionette.errors import MarionetteError
-from marionette.follow import STATES, Follower, sync_ticks
+from marionette.follow import DEFAULT_START, STATES, Follower, sync_ticks
 from marionette.loudness import wav_frames, wav_loudness
 from marionette.show import load_show
 
@@ -102,7 +102,7 @@ def taught_frames(taught, period: float):
 
 
 def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool = True,
-             start: float | None = None):
+             start: float | None = DEFAULT_START):
     """Runs the follower over two recordings; returns (track, period [s], follower).
     live_onsets False: the live frames carry no onset (a node's LOUDNESS);
     start: where the live music starts in the taught music [s] (the cue, as
@@ -187,10 +187,10 @@ def start_time(text: str) -> float | None:
 
 
 def add_start_argument(p) -> None:
-    p.add_argument("--start", type=start_time, default=None, metavar="SECONDS|unknown",
-                   help="where in the taught music the live music starts (a cue, e.g. 0: the "
-                        "top): wait there through the silence, play from the music's onset; "
-                        "'unknown' (default): search the whole piece")
+    p.add_argument("--start", type=start_time, default=DEFAULT_START, metavar="SECONDS|unknown",
+                   help=f"where in the taught music the live music starts (a cue; default "
+                        f"{DEFAULT_START:g}, the top): wait there through the silence, play from "
+                        f"the music's onset; 'unknown': search the whole piece")
 
 
 def register(sub) -> None:

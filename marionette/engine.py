@@ -26,7 +26,7 @@ from marionette import _core
 from marionette.config import FigureConfig
 from marionette.errors import EngineError
 from marionette.recorder import FlightRecorder
-from marionette.follow import STATES as _FOLLOW_STATE_NAMES, engine_options as follower_options
+from marionette.follow import DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, engine_options as follower_options
 from marionette.show import Show, fit_to_figure
 from marionette.transport.supervisor import LinkSupervisor
 
@@ -108,7 +108,7 @@ class Engine:
     def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
                  interpolation: str = "cubic", output=None, protocol: str | None = None,
                  record=None, rate: float = 1.0, on_limits: str = "error", start_pose=None,
-                 follow: str | None = None, poll: str = "all", follow_start: float | None = None,
+                 follow: str | None = None, poll: str = "all", follow_start: float | None = DEFAULT_START,
                  on_lost: str | None = None):
         if lead not in LEAD_MODES:
             raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")

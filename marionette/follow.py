@@ -24,6 +24,7 @@ from marionette.errors import MarionetteError
 STATES = _follow.STATES         # state code -> name: searching, locked, holding, paused
 FLAGS = _follow.FLAGS           # flag name -> bit
 MAX_RATES = 64                  # the C search's rate grid limit
+DEFAULT_START = 0.0             # where the live music starts by default [s of the show]: the top (a cue)
 
 
 class FollowError(MarionetteError, ValueError):

@@ -20,7 +20,9 @@ import numpy as np
 
 from marionette._core import FLAG_UNFOLLOWED
 
-SEARCHING, LOCKED = 0, 1        # record follow_state codes (marionette.follow.STATES)
+from marionette.follow import STATES
+
+SEARCHING, LOCKED, WAITING = (STATES.index(s) for s in ("searching", "locked", "waiting"))
 POLL_INTERVAL = 0.1             # how often the watcher reads the snapshot [s]
 UNFOLLOWED_LIMIT = 0.5          # play exits 1 when more of the show than this searched [1]
 SILENT_RMS = 1e-4               # a recording whose every frame is below this is silent [full scale]
@@ -120,14 +122,15 @@ class FollowShare:
 
     ticks: int                  # ticks run
     before_music: int           # ticks before the first live frame
-    searching: int              # ticks in state searching from the first live frame on
+    searching: int              # ticks searching, or waiting at the cue, from the first live frame on
     unfollowed: int             # ... of them after the first place (FLAG_UNFOLLOWED)
     losses: int                 # times the music became unfollowed
     locked: bool                # the follower was LOCKED on some tick
 
     @property
     def share(self) -> float:
-        """Share of the show that ran unfollowed: ticks searching (music heard) / ticks [1]."""
+        """Share of the show that ran unfollowed: ticks searching or waiting at the
+        cue while frames came (silence is heard too) / ticks [1]."""
         return self.searching / self.ticks if self.ticks else 0.0
 
     @property
@@ -141,7 +144,7 @@ def follow_share(records: np.ndarray) -> FollowShare:
     heard = np.flatnonzero(np.isfinite(records["live_loudness"]))
     first = int(heard[0]) if len(heard) else len(states)                # [tick]
     return FollowShare(ticks=len(states), before_music=first,
-                       searching=int(np.sum(states[first:] == SEARCHING)),
+                       searching=int(np.sum(np.isin(states[first:], (SEARCHING, WAITING)))),
                        unfollowed=int(np.sum(lost)),
                        losses=int(np.sum(np.diff(np.concatenate([[False], lost]).astype(np.int8)) == 1)),
                        locked=bool(np.any(states == LOCKED)))
@@ -149,7 +152,8 @@ def follow_share(records: np.ndarray) -> FollowShare:
 
 def share_line(s: FollowShare, period: float, on_lost: str) -> str:
     """The summary line: the share of the show that ran unfollowed."""
-    return (f"  music not followed: {s.share:.0%} of the show searching ({s.searching * period:.2f} s "
+    return (f"  music not followed: {s.share:.0%} of the show searching or waiting for it "
+            f"({s.searching * period:.2f} s "
             f"from the first live frame at {s.before_music * period:.2f} s), {s.unfollowed * period:.2f} s "
             f"of it after the first place, lost {s.losses} time(s); on_lost {on_lost}")
 

@@ -51,6 +51,7 @@ def _run(stored, live, on_lost):
     x = 0.3 * np.sin(2 * np.pi * 0.2 * np.arange(len(stored)) * T)[None]      # [m]
     show = Show(axis_names=config.axis_names, units=["m"], positions=x, loudness=stored, tick_period=T)
     with Engine(config, show, follow="smooth", lead="none", interpolation="linear", record=True,
+                follow_start=None,
                 on_lost=on_lost) as e:
         for value in live:
             if np.isfinite(value):              # NaN: no frame this tick

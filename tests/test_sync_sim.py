@@ -11,6 +11,7 @@ import pytest
 from marionette import cli
 from marionette.bench.music import synthesize
 from marionette.bench.tape import Deck, play
+from marionette.follow import STATES
 from marionette.loudness import write_wav
 from conftest import run_cli
 
@@ -54,7 +55,7 @@ def test_sync_sim_follows_and_reports_accuracy(recordings, capsys, mode, extra):
     assert abs(len(rows) - n) <= 2                         # one row per tick of live audio
     assert [int(r["tick"]) for r in rows] == list(range(len(rows)))
     assert float(rows[100]["time_s"]) == pytest.approx(100 * T)
-    assert {r["state"] for r in rows} <= {"searching", "locked", "holding", "paused"}
+    assert {r["state"] for r in rows} <= set(STATES)
     pos = np.array([float(r["position_s"]) for r in rows])
     m = min(len(pos), n)
     late = np.arange(m) * T >= 5.0
