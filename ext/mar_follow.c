@@ -1599,6 +1599,8 @@ static void play_from_cue(mar_follow *f, uint64_t onset)
 {
     f->cue_onset = f->seg_start = onset;
     f->p = f->cue_from + (double)(f->t - onset) + 0.5;     /* its middle, on average */
+    if (f->opt.mode == MAR_FOLLOW_PAPER)
+        f->p = floor(f->p + 0.5);                           /* paper: whole stored samples */
     f->r = 1.0;
     kf_init(f, 1.0, 1e-3);
     f->state = MAR_FOLLOW_HOLDING;
@@ -1715,6 +1717,8 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
     int confirmed = clear && fabs(line_now - (f->cue_prev + best_r * (double)(f->t - f->cue_prev_t))) <= 1.0;
     f->cue_prev = clear ? line_now : NAN;
     f->cue_prev_t = f->t;
+    if (f->opt.mode == MAR_FOLLOW_PAPER)           /* paper: whole samples, one per tick */
+        line_now = floor(line_now + 0.5), best_r = 1.0;
     if (confirmed) {
         f->p = line_now;
         f->r = best_r;
@@ -1734,7 +1738,7 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
          * better than the tracker's first short windows (their rate runs
          * away in sustained music); the place stays unproven. A flat peak
          * (slow pads) leaves the rate open: the tracker keeps it */
-        f->p = f->cue_from + best_r * ((double)ages - 0.5) + best_d;
+        f->p = line_now;
         f->r = best_r;
         kf_init(f, 1.0, 4.0 / ((double)ages * (double)ages));  /* a tick over the fit, twice [1] */
     } else if (f->cue_fits == CUE_REFUTE_FIT + 1 && best < f->opt.track_threshold) {   /* NaN: flat, not refuted */

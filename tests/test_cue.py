@@ -161,3 +161,26 @@ def test_the_engine_waits_in_its_start_pose_until_the_music_starts():
     assert np.all(r["position"][wait] == cue_tick)
     err = r["position"] * T - played.truth
     assert np.mean(np.abs(err[t >= 3.0]) <= 0.05) >= 0.98
+
+
+def test_paper_mode_plays_from_the_cue_in_whole_samples():
+    """The paper's tracker doubles or skips whole stored samples: from a cue
+    too, the position stays on whole samples, and from the lock on each tick
+    steps 0, 1 or 2."""
+    rng = np.random.default_rng(12)
+    for case in range(4):
+        piece, (loud, onset) = taught(("pop", "waltz", "techno")[case % 3], int(rng.integers(1, 100)))
+        deck = Deck(speed=float(rng.uniform(0.96, 1.04)), snr_db=20.0, start=0.0,
+                    pauses=((0.0, 1.0),), seconds=12.0, sample_rate=11025, seed=case)
+        played = play(piece.samples, piece.sample_rate, deck)
+        live_loud, live_onset = live_frames_of(played.samples, played.sample_rate)
+        f = Follower(loud, onset=onset, mode="paper")
+        f.cue(0.0)
+        track = f.run(sync_ticks(live_loud)[:len(played.truth)], sync_ticks(live_onset)[:len(played.truth)])
+        playing = track.state != WAITING
+        assert np.any(playing), case
+        assert np.all(track.position[playing] == np.round(track.position[playing])), case
+        locked = np.flatnonzero(track.state == LOCKED)
+        assert len(locked), case
+        steps = np.diff(track.position[locked[0] + 1:])       # the line is placed until the lock
+        assert set(np.unique(steps)) <= {0.0, 1.0, 2.0}, (case, set(np.unique(steps)))

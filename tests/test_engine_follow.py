@@ -36,7 +36,10 @@ def show_for(config, stored):
 
 
 def run(config, show, live, mode):
-    with Engine(config, show, follow=mode, lead="none", interpolation="linear", record=True) as e:
+    """An unknown start: the first lock is a jump of the position (a cue at
+    the top is tests/test_cue.py's)."""
+    with Engine(config, show, follow=mode, lead="none", interpolation="linear", record=True,
+                follow_start=None) as e:
         for value in live:
             if np.isfinite(value):              # NaN: no frame came this tick
                 e.push_loudness(float(value))
@@ -90,7 +93,8 @@ def test_the_engine_follows_with_onsets_as_sync_sim_does():
     config = make_figure(1, max_speed=50.0, max_accel=5000.0)
     show = show_for(config, stored)
     show.onsets = stored_onsets
-    with Engine(config, show, follow="smooth", lead="none", interpolation="linear", record=True) as e:
+    with Engine(config, show, follow="smooth", lead="none", interpolation="linear", record=True,
+                follow_start=None) as e:
         for value, onset in zip(live, live_onsets):
             if np.isfinite(value):
                 e.push_loudness(float(value), float(onset))
