@@ -1582,8 +1582,12 @@ static int music_started(mar_follow *f, int have, uint64_t *onset)
     }
     if (db <= f->lead_hi + RISE_START_DB) {             /* still the leader */
         f->rise_step = 0;
-        if (db >= f->lead_hi - STEADY_RANGE_DB)
-            f->lead_lo = fmin(f->lead_lo, db), f->lead_hi = fmax(f->lead_lo + STEADY_RANGE_DB, f->lead_hi);
+        if (db >= f->lead_hi - STEADY_RANGE_DB) {
+            /* its range follows it down, and counts as STEADY_RANGE_DB wide
+             * at least: a rise is measured from the top of the hiss's wobble */
+            f->lead_lo = fmin(f->lead_lo, db);
+            f->lead_hi = fmax(f->lead_hi, f->lead_lo + STEADY_RANGE_DB);
+        }
         return 0;
     }
     if (!f->rise_step)
@@ -1680,9 +1684,10 @@ static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
 }
 
 /* After CUE_FIT_AT frames of music: the rate and offset on lines through
- * the cue that fit the live music best. The first clear fit locks; none
- * that reaches track_threshold by the last refutes the cue: the whole-piece
- * search takes over (the position runs on meanwhile). */
+ * the cue that fit the live music best. Two clear fits in a row on the
+ * same line lock; a sharp fit places the line; no fit reaching
+ * track_threshold after 2 s of music refutes the cue (flat music is no
+ * evidence): the whole-piece search takes over, the position running on. */
 static void cue_fit(mar_follow *f, uint32_t *flags)
 {
     size_t ages = (size_t)(f->t + 1 - f->cue_onset);
@@ -1701,8 +1706,9 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
             f->cue_onset = f->seg_start = f->wait_start;
         }
     }
+    int sharp = lockable_peak(f, best, best_kappa);
     double rival = -1.0;
-    if (best >= CUE_LOCK && lockable_peak(f, best, best_kappa)) {
+    if (best >= CUE_LOCK && sharp) {
         long j0;
         double c;
         size_t m = resample(f, f->cue_from + best_r * ((double)ages - 0.5), best_r, ages, &j0, &c);
@@ -1711,7 +1717,7 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
     double lead = fisher(best) - fisher(rival);
     if (best >= f->opt.track_threshold)
         onset_line(f, ages, &best_r, &best_d);
-    int clear = best >= CUE_LOCK && lockable_peak(f, best, best_kappa) && lead >= CUE_PRIOR * lock_lead(f, ages);
+    int clear = best >= CUE_LOCK && sharp && lead >= CUE_PRIOR * lock_lead(f, ages);
     double line_now = f->cue_from + best_r * ((double)ages - 0.5) + best_d;     /* [stored ticks] */
     /* two clear fits in a row on the same line, as a search lock is confirmed */
     int confirmed = clear && fabs(line_now - (f->cue_prev + best_r * (double)(f->t - f->cue_prev_t))) <= 1.0;
@@ -1733,7 +1739,7 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         f->h_slow = f->h_fast = best;
         f->c.locks++;
         *flags |= MAR_FOLLOW_F_MEASURED;
-    } else if (best >= f->opt.track_threshold && lockable_peak(f, best, best_kappa)) {
+    } else if (best >= f->opt.track_threshold && sharp) {
         /* a clear fit over all the music since the onset places the line
          * better than the tracker's first short windows (their rate runs
          * away in sustained music); the place stays unproven. A flat peak
