@@ -23,9 +23,8 @@ struct mar_engine {
     /* tick thread only */
     double position;                /* p [show ticks] */
     double rate;                    /* r [show ticks per tick] */
-    uint32_t follow_flags;          /* MAR_FOLLOW_F_* of this tick's follower steps */
     mar_follow *follow;             /* NULL: the rate drives the playback clock */
-    mar_follow_out follow_out;
+    mar_follow_out follow_out;      /* this tick's answer (mar_follow_tick: flags of all its steps) */
     int had_place;                  /* a tick ended with the follower not SEARCHING: it knew a place */
     int unfollowed;                 /* this tick: SEARCHING after it had a place (MAR_FLAG_UNFOLLOWED) */
     int rejoin;                     /* this tick: following again after a hold (MAR_ON_LOST_HOLD) */
@@ -239,7 +238,6 @@ static double follow_music(mar_engine *e, int64_t elapsed_periods, int seek, dou
     e->rejoin = hold && was_unfollowed && !e->unfollowed;
     if (!searching)
         e->had_place = 1;
-    e->follow_flags = e->follow_out.flags;
     if (hold && e->unfollowed) {
         e->position = e->held_at;
         e->rate = 0.0;
@@ -352,7 +350,7 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         flags |= MAR_FLAG_BAD_INPUT;
     }
     take_request(e);
-    if (e->follow && ((e->follow_flags & MAR_FOLLOW_F_JUMP) || e->rejoin) && e->mode == MAR_MODE_SHOW) {
+    if (e->follow && ((e->follow_out.flags & MAR_FOLLOW_F_JUMP) || e->rejoin) && e->mode == MAR_MODE_SHOW) {
         /* the music's position jumped (lock, re-lock, resume, or the end of
          * a hold while it was not followed): a timed blend to where the
          * music will be when the figure arrives, not a slew */

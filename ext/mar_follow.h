@@ -139,35 +139,37 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
                                      const double *onset, size_t n_stored, int *status);
 void mar_follow_destroy(mar_follow *f);
 
-/* One tick. live: the newest live loudness frame (linear, >= 0), or NaN
- * when none arrived this tick; a negative or infinite value is counted
- * (bad_input), flagged and treated as missing, never used. Fills *out.
- * Never allocates, never blocks, never fails. */
+/* One step: one live loudness frame (linear, >= 0), or NaN for a step
+ * without one; a negative or infinite value is counted (bad_input), flagged
+ * and treated as missing, never used. Fills *out. Never allocates, never
+ * blocks, never fails. The engine and the offline tools step through
+ * mar_follow_tick, which also runs the clock between frames. */
 void mar_follow_step(mar_follow *f, double live, mar_follow_out *out);
 
-/* Known start or seek: the live music is at position [stored ticks] now.
- * The follower plays on from there at rate 1 (state HOLDING) and confirms
- * by correlation; if it cannot, it searches. NaN: unknown, search the whole
- * piece (as after create). The live history is kept. */
-/* One tick with the live frame's loudness and its onset strength [dB]. A
+/* One step with the live frame's loudness and its onset strength [dB]. A
  * follower made with onsets places the tracking peak on the onset feature
  * where the window has onsets; NaN onset: this frame has none (a source
  * that measures loudness only), the loudness still counts. A follower made
  * without ignores the onset. */
 void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_out *out);
 
+/* Known start or seek: the live music is at position [stored ticks] now.
+ * The follower plays on from there at rate 1 (state HOLDING) and confirms
+ * by correlation; if it cannot, it searches. NaN: unknown, search the whole
+ * piece (as after create). The live history is kept. */
 void mar_follow_reset(mar_follow *f, double position);
 
 /* The show starts from a cue: the live music will start at `position`
  * [stored ticks] (0: the top). The follower WAITS there (rate 0) through
  * the silence before the music; at the music's onset (a rise out of a
- * steady leader, or music from the first frame) it plays from the first
+ * steady leader, a note, or music from the first frame) it plays from the first
  * audible stored frame at or after the cue at rate 1 (HOLDING), fits rate
- * and offset jointly on lines through the cue after 0.5, 1 and 2 s of
- * music, and LOCKS at the first clear fit. No other LOCKED comes from the
- * cue: a cue the music refutes (no fit after 2 s, or the tracking goes
- * bad) hands over to the whole-piece search. NaN: no cue, search the whole
- * piece (as after create). */
+ * and offset jointly on lines through the cue (every 0.1 s for 2 s, then
+ * every 0.5 s to 10 s), and LOCKS on two clear fits in a row on the same
+ * line that lead every other place of the piece. The tracker alone never
+ * makes a pending cue LOCKED; the whole-piece search listens beside it and
+ * its lock ends the cue; a cue the music refutes (no fit after 2 s) hands
+ * over to it. NaN: no cue, search the whole piece (as after create). */
 void mar_follow_cue(mar_follow *f, double position);
 
 /* One tick of the show's clock, the way the engine and every offline tool

@@ -34,7 +34,7 @@ import numpy as np
 
 from marionette.config import FOLLOW_MODES, load_config
 from marionette.errors import MarionetteError
-from marionette.follow import DEFAULT_START, STATES, Follower, sync_ticks
+from marionette.follow import DEFAULT_START, STATES, Follower, cue_ticks, sync_ticks
 from marionette.loudness import wav_frames, wav_loudness
 from marionette.show import load_show
 
@@ -119,10 +119,7 @@ def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool 
         raise SyncSimError(f"{taught}: shorter than two ticks ({len(stored)} frames)")
     follower = Follower(stored, settings, period, onset=stored_onsets, mode=mode)
     if start is not None:
-        if not (math.isfinite(start) and 0.0 <= start <= len(stored) * period):
-            raise SyncSimError(f"--start {start!r} s is outside the taught music "
-                               f"[0, {len(stored) * period:g}] s")
-        follower.cue(start / period)
+        follower.cue(cue_ticks(start, len(stored), period, "--start"))
     track = follower.run(sync_ticks(frames), sync_ticks(onsets))
     return track, period, follower
 

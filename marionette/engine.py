@@ -12,8 +12,8 @@ or ``engine.step(n)`` for n ticks on a virtual clock (tests, offline tools).
 from __future__ import annotations
 
 import errno
-import os
 import math
+import os
 import threading
 import time
 import warnings
@@ -26,7 +26,8 @@ from marionette import _core
 from marionette.config import FigureConfig
 from marionette.errors import EngineError
 from marionette.recorder import FlightRecorder
-from marionette.follow import DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, engine_options as follower_options
+from marionette.follow import (DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
+                               engine_options as follower_options)
 from marionette.show import Show, fit_to_figure
 from marionette.transport.supervisor import LinkSupervisor
 
@@ -95,10 +96,10 @@ class Engine:
     until blend_in() moves it into the show. follow: "smooth", "paper" or
     True (the figure's [follow] mode) to let the live music drive the show
     (push_loudness), None to let the rate drive it. follow_start: where in
-    the show's music the live music starts [s] (a cue, e.g. 0: the top): the
-    show waits there through the silence before the music and plays from
-    the music's onset (mar_follow_cue); None (default until the gaps in
-    docs/music.md are closed): unknown, the follower searches the whole piece.
+    the show's music the live music starts [s] (a cue; default 0, the top:
+    follow.DEFAULT_START): the show waits there through the silence before
+    the music and plays from the music's onset (mar_follow_cue); None:
+    unknown, the follower searches the whole piece.
     on_lost: what the show does while the music is not followed (the
     follower searches after it had a place; the records' FLAG_UNFOLLOWED):
     "flywheel" (play on at the last rate) or "hold" (stand at the place
@@ -125,7 +126,8 @@ class Engine:
         self.config = config
         self.show = fit_to_figure(show, config, on_limits)
         positions = np.ascontiguousarray(self.show.positions, dtype=np.float64)
-        cue = self._cue(follow_start) if follow is not None else float("nan")
+        cue = float("nan") if follow is None else cue_ticks(follow_start, self.show.n_ticks,
+                                                            config.tick_period, "follow_start")
         first = 0 if math.isnan(cue) else min(int(round(cue)), positions.shape[1] - 1)
         start = positions[:, first] if start_pose is None else self._pose(start_pose, fill=None)
         self.follow = follow
@@ -309,16 +311,6 @@ class Engine:
         if not (0.0 <= rate <= MAX_RATE):
             raise ValueError(f"rate {rate!r} is outside [0, {MAX_RATE}] show ticks per tick")
         _raise_for(self._core.set_rate(float(rate)), "set_rate")
-
-    def _cue(self, start: float | None) -> float:
-        """follow_start [s of the show] as a cue [show ticks]; None: NaN, unknown."""
-        if start is None:
-            return float("nan")
-        start = float(start)
-        if not (math.isfinite(start) and 0.0 <= start <= self.show.duration):
-            raise ValueError(f"follow_start {start!r} s is outside the show's music "
-                             f"[0, {self.show.duration:g}] s (None: unknown)")
-        return start / self.config.tick_period
 
     def seek(self, position: float) -> None:
         """Jump the playback position [show ticks]; the hard limits smooth the jump."""

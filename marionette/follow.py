@@ -13,6 +13,7 @@ docs/music.md describes the algorithm and the options.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,6 +73,18 @@ def c_options(settings: FollowConfig | None = None, period: float = 0.020, **ove
     opt["rate_step"] = max(opt["rate_step"], (s.rate_max - s.rate_min) / (MAX_RATES - 1) * 1.000001)
     opt.update(overrides)
     return opt
+
+
+def cue_ticks(start: float | None, n_stored: int, period: float, what: str = "start") -> float:
+    """A start [s into the taught music] as a cue [stored ticks]; None:
+    unknown (NaN). what names the setting in the error."""
+    if start is None:
+        return float("nan")
+    start = float(start)
+    if not (math.isfinite(start) and 0.0 <= start <= n_stored * period):
+        raise FollowError(f"{what} {start!r} s is outside the taught music [0, {n_stored * period:g}] s "
+                          f"(unknown: None)")
+    return start / period
 
 
 def default_options() -> dict:

@@ -2,15 +2,17 @@
 silence before the music, plays from the music's onset, and never locks on
 the cue's word alone. Random decks from the bench's synthesizer and tape
 deck, fixed seeds."""
+import functools
+
 import numpy as np
 import pytest
 
-from conftest import make_figure
+from conftest import make_figure, run_cli
 from marionette.bench.music import STYLES, synthesize
 from marionette.bench.tape import Deck, play
 from marionette.engine import Engine
 from marionette.follow import STATES, Follower, sync_ticks
-from marionette.loudness import loudness, onsets
+from marionette.loudness import loudness, onsets, write_wav
 from marionette.show import Show
 
 T = 0.020
@@ -22,7 +24,9 @@ def live_frames_of(samples, rate):
     return loudness(samples, rate), onsets(samples, rate)
 
 
+@functools.cache
 def taught(style, seed):
+    """A synthesized piece and its (loudness, onset) frames, made once per session."""
     piece = synthesize(style, seed=seed)
     return piece, live_frames_of(piece.samples, piece.sample_rate)
 
@@ -184,3 +188,22 @@ def test_paper_mode_plays_from_the_cue_in_whole_samples():
         assert len(locked), case
         steps = np.diff(track.position[locked[0] + 1:])       # the line is placed until the lock
         assert set(np.unique(steps)) <= {0.0, 1.0, 2.0}, (case, set(np.unique(steps)))
+
+
+def test_a_start_outside_the_music_is_refused_by_name(tmp_path):
+    """follow_start / --start past the end (or negative) is a clear error,
+    exit status 2 from the command, never a clamped cue."""
+    piece, (loud, onset) = taught("pop", 3)
+    config = make_figure(1)
+    show = Show(axis_names=config.axis_names, units=["m"], positions=np.zeros((1, len(loud))),
+                loudness=loud, onsets=onset, tick_period=T)
+    end = len(loud) * T                                                      # [s]
+    for start in (-1.0, end + 0.5, float("nan")):
+        with pytest.raises(ValueError, match=f"follow_start {start!r} s is outside the taught music"):
+            Engine(config, show, follow=True, follow_start=start)
+    wav = tmp_path / "music.wav"
+    write_wav(wav, piece.samples, int(piece.sample_rate))
+    result = run_cli("sync-sim", "--taught", wav, "--live", wav, "--out", tmp_path / "t.csv",
+                     "--start", f"{end + 10:g}")
+    assert result.returncode == 2 and "Traceback" not in result.stderr, result.stderr
+    assert f"--start {end + 10:g} s is outside the taught music [0, {end:g}] s" in result.stderr
