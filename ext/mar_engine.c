@@ -26,8 +26,11 @@ struct mar_engine {
     mar_follow *follow;             /* NULL: the rate drives the playback clock */
     mar_follow_out follow_out;      /* this tick's answer (mar_follow_tick: flags of all its steps) */
     int had_place;                  /* a tick ended with the follower not SEARCHING: it knew a place */
-    int unfollowed;                 /* this tick: SEARCHING after it had a place (MAR_FLAG_UNFOLLOWED) */
-    int rejoin;                     /* this tick: following again after a hold (MAR_ON_LOST_HOLD) */
+    int unfollowed;                 /* this tick: SEARCHING after it had a place, or the source
+                                     * lost (MAR_FLAG_UNFOLLOWED) */
+    int rejoin;                     /* this tick: following again after a hold (MAR_ON_LOST_HOLD),
+                                     * or a seek after the source was lost: blend there */
+    int source_lost;                /* latched: the live source was lost (MAR_FLAG_SOURCE_LOST) */
     double held_at;                 /* on hold: the position when following was lost [show ticks] */
     int64_t tick;
     uint64_t bad_input_seen;        /* bad_input at the previous tick */
@@ -50,6 +53,7 @@ struct mar_engine {
     _Atomic double rate_request;
     _Atomic double seek_request;
     _Atomic int seek_pending;
+    _Atomic int source_lost_request;    /* set once by mar_engine_source_lost, never cleared */
 
     _Atomic uint64_t ticks, overruns, limited, bad_input;
     _Atomic uint32_t node_alarms;
@@ -221,7 +225,15 @@ static double newest_live_loudness(mar_engine *e)
  * an unknown start it has no place and stands still at rate 0). With
  * MAR_ON_LOST_HOLD the show does not play on: the position stays where the
  * previous tick had it, rate 0, and when the follower has a place again the
- * tick blends there (e->rejoin), whether or not it flagged a jump. */
+ * tick blends there (e->rejoin), whether or not it flagged a jump.
+ *
+ * Once the source is lost (e->source_lost, latched) the music is not
+ * followed to the end, whatever the follower says: it still steps (on the
+ * frames already in the ring, then none) and its state and confidence go
+ * into the records, but its position, rate and jumps no longer drive the
+ * show. The flywheel is then the engine's own: the position runs on at the
+ * rate of the previous tick (0 while WAITING at the cue or with no place
+ * yet); hold stands as above. A seek still places the show (blended). */
 static double follow_music(mar_engine *e, int64_t elapsed_periods, int seek, double seek_to)
 {
     mar_follow_frame frames[MAR_FOLLOW_TICK_FRAMES];
@@ -232,15 +244,22 @@ static double follow_music(mar_engine *e, int64_t elapsed_periods, int seek, dou
     int hold = e->opt.follow_on_lost == MAR_ON_LOST_HOLD;
     int was_unfollowed = e->unfollowed;
     int searching = e->follow_out.state == MAR_FOLLOW_SEARCHING;
-    if (searching && e->had_place && !was_unfollowed)
+    int unfollowed = e->source_lost || (searching && e->had_place);
+    if (unfollowed && !was_unfollowed)
         e->held_at = e->position;       /* the last followed tick's position */
-    e->unfollowed = searching && e->had_place;
-    e->rejoin = hold && was_unfollowed && !e->unfollowed;
+    e->unfollowed = unfollowed;
+    e->rejoin = hold && was_unfollowed && !unfollowed;
     if (!searching)
         e->had_place = 1;
+    if (e->source_lost && seek) {       /* the operator places the show: blend there */
+        e->held_at = seek_to;
+        e->rejoin = 1;
+    }
     if (hold && e->unfollowed) {
         e->position = e->held_at;
         e->rate = 0.0;
+    } else if (e->source_lost) {        /* the engine's flywheel at the previous tick's rate */
+        e->position = seek ? seek_to : e->position + e->rate * (double)elapsed_periods;
     } else {
         e->position = e->follow_out.position;
         e->rate = e->follow_out.rate;
@@ -325,6 +344,8 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     /* 1. playback clock: advance by the rate in force since the last tick,
      *    then take requests. Missed periods still count (real time). The
      *    clock waits while moves or a hold drive the figure. */
+    if (!e->source_lost && atomic_load_explicit(&e->source_lost_request, memory_order_acquire))
+        e->source_lost = 1;
     int seek = atomic_exchange_explicit(&e->seek_pending, 0, memory_order_acquire);
     double seek_to = atomic_load_explicit(&e->seek_request, memory_order_relaxed);
     double frame;
@@ -350,7 +371,8 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         flags |= MAR_FLAG_BAD_INPUT;
     }
     take_request(e);
-    if (e->follow && ((e->follow_out.flags & MAR_FOLLOW_F_JUMP) || e->rejoin) && e->mode == MAR_MODE_SHOW) {
+    int jump = (e->follow_out.flags & MAR_FOLLOW_F_JUMP) && !e->source_lost;
+    if (e->follow && (jump || e->rejoin) && e->mode == MAR_MODE_SHOW) {
         /* the music's position jumped (lock, re-lock, resume, or the end of
          * a hold while it was not followed): a timed blend to where the
          * music will be when the figure arrives, not a slew */
@@ -381,6 +403,8 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         flags |= MAR_FLAG_LIMITED;
     if (e->follow && e->unfollowed)
         flags |= MAR_FLAG_UNFOLLOWED;
+    if (e->source_lost)
+        flags |= MAR_FLAG_SOURCE_LOST;
     e->was_playing = e->mode == MAR_MODE_SHOW;
     flags |= e->mode == MAR_MODE_MOVE ? MAR_FLAG_MOVING : e->mode == MAR_MODE_HOLD ? MAR_FLAG_HOLDING : 0u;
     if (e->mode == MAR_MODE_MOVE && e->move_time >= e->move_duration)  /* arrived: next tick */
@@ -468,6 +492,11 @@ int mar_engine_push_frame(mar_engine *e, double value, double onset)
 void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask)
 {
     atomic_store_explicit(&e->node_alarms, mask, memory_order_relaxed);
+}
+
+void mar_engine_source_lost(mar_engine *e)
+{
+    atomic_store_explicit(&e->source_lost_request, 1, memory_order_release);
 }
 
 int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized)

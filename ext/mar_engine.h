@@ -76,6 +76,7 @@ enum mar_request {
 #define MAR_FLAG_MOVING    8u   /* online moves drive the commands */
 #define MAR_FLAG_HOLDING  16u   /* the figure holds a pose */
 #define MAR_FLAG_UNFOLLOWED 32u /* the music is not followed: the follower searches after it had a place */
+#define MAR_FLAG_SOURCE_LOST 64u /* the live music's source was lost (mar_engine_source_lost); latched */
 
 /* A flight-recorder record, followed in memory by n_axes commands [unit]. */
 typedef struct {
@@ -128,6 +129,12 @@ int mar_engine_push_loudness(mar_engine *e, double value);   /* one 20 ms frame,
 /* The same with the frame's onset strength [dB] (>= 0; NaN: the source has none) */
 int mar_engine_push_frame(mar_engine *e, double value, double onset);
 void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask); /* copied into every record */
+/* The live music's source is lost (a sound card's stream failed or went
+ * silent). Latched from the next tick to the end: every record carries
+ * MAR_FLAG_SOURCE_LOST, and with a follower the music is not followed from
+ * then on (MAR_FLAG_UNFOLLOWED, follow_on_lost applies at once: the engine
+ * plays on at the last tick's rate, or holds). No later frame clears it. */
+void mar_engine_source_lost(mar_engine *e);
 
 /* Ask for a move (enum mar_request); targets [unit] has n_axes values for
  * MAR_REQ_GOTO and is ignored otherwise. synchronized: all axes arrive

@@ -63,6 +63,8 @@ cdef extern from "mar_follow.h" nogil:
 
 
 cdef extern from "mar_engine.h" nogil:
+    enum:
+        MAR_FLAG_SOURCE_LOST
     ctypedef struct mar_axis:
         mar_limits limits
         double dead_time
@@ -114,6 +116,7 @@ cdef extern from "mar_engine.h" nogil:
     int mar_engine_push_loudness(mar_engine *e, double value)
     int mar_engine_push_frame(mar_engine *e, double value, double onset)
     void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask)
+    void mar_engine_source_lost(mar_engine *e)
     int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized)
     int mar_engine_snapshot(const mar_engine *e, mar_record *rec, double *commands)
     size_t mar_engine_record_size(const mar_engine *e)

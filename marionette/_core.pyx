@@ -33,6 +33,7 @@ FLAG_BAD_INPUT = 4
 FLAG_MOVING = 8
 FLAG_HOLDING = 16
 FLAG_UNFOLLOWED = 32    # the music is not followed: the follower searches after it had a place
+FLAG_SOURCE_LOST = MAR_FLAG_SOURCE_LOST   # the live source was lost (Engine.source_lost), latched
 ON_LOST_FLYWHEEL = 0    # enum mar_on_lost
 ON_LOST_HOLD = 1
 REQUEST_GOTO = 1        # enum mar_request
@@ -188,6 +189,10 @@ cdef class CoreEngine:
 
     def set_node_alarms(self, uint32_t mask):
         mar_engine_set_node_alarms(self.engine, mask)
+
+    def source_lost(self):
+        """The live source is lost: latched from the next tick (FLAG_SOURCE_LOST)."""
+        mar_engine_source_lost(self.engine)
 
     def request(self, int kind, targets=None, bint synchronized=False):
         """Move request (REQUEST_*); targets: n_axes positions [unit] for REQUEST_GOTO."""

@@ -79,6 +79,8 @@ def _open_audio(args, engine_box: list):
 
     def audio_lost(reason: str) -> None:      # at once, from the source's watchdog
         print(f"audio input {audio.name!r} lost: {reason}", file=sys.stderr, flush=True)
+        if engine_box:                        # the next tick on: not followed, flagged (latched)
+            engine_box[0].source_lost(reason)
 
     # the index comes as a string: the source takes digits as an index
     audio = LiveLoudness(to_engine, device=args.audio_device or None, onsets=True, on_lost=audio_lost)

@@ -163,6 +163,7 @@ class Engine:
         self._drain_thread: threading.Thread | None = None
         self._stop_drain = threading.Event()
         self.report: dict = {}
+        self.source_lost_reason: str | None = None     # the first source_lost()'s reason
 
     def _check_addresses(self) -> None:
         """Every axis must be addressable by the protocol (the C sink refuses
@@ -345,6 +346,17 @@ class Engine:
         blend_in() then moves the figure back into the show."""
         if self.supervisor is not None:
             self.supervisor.release()
+
+    def source_lost(self, reason: str) -> None:
+        """The live music's source is lost (a sound card's stream failed or
+        ended, or no frames came): from the next tick to the end every record
+        carries FLAG_SOURCE_LOST and the music is not followed (FLAG_UNFOLLOWED;
+        on_lost applies at once: the show plays on at the last rate, or holds),
+        whatever frames come later (docs/music.md). From any thread; the
+        first reason is kept in source_lost_reason, later calls change nothing."""
+        if self.source_lost_reason is None:
+            self.source_lost_reason = str(reason)
+        self._core.source_lost()
 
     def push_loudness(self, value: float, onset: float = float("nan")) -> None:
         """Hand the tick a live loudness frame (>= 0, finite) and its onset

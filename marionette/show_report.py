@@ -6,7 +6,8 @@ follower uses.
 
 The music is *not followed* on a tick whose follower state is searching
 after some earlier tick had a place: the engine marks those ticks with
-FLAG_UNFOLLOWED (docs/music.md, ``on_lost``). Nothing here touches the
+FLAG_UNFOLLOWED (docs/music.md, ``on_lost``); from a lost live source on
+(``Engine.source_lost``, FLAG_SOURCE_LOST) every tick is. Nothing here touches the
 tick: the real-time lines come from a thread that reads the engine's
 snapshot.
 """
@@ -18,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from marionette._core import FLAG_UNFOLLOWED
+from marionette._core import FLAG_SOURCE_LOST, FLAG_UNFOLLOWED
 
 from marionette.follow import STATES
 
@@ -122,10 +123,14 @@ class FollowShare:
 
     ticks: int                  # ticks run
     before_music: int           # ticks before the first live frame
-    searching: int              # ticks searching, or waiting at the cue, from the first live frame on
+    searching: int              # ticks searching, or waiting at the cue, from the first live frame on,
+                                # and every tick from a lost source on
     unfollowed: int             # ... of them after the first place (FLAG_UNFOLLOWED)
     losses: int                 # times the music became unfollowed
     locked: bool                # the follower was LOCKED on some tick
+    source_lost: int | None = None      # tick from which the live source was lost (FLAG_SOURCE_LOST)
+    source_lost_position: float = float("nan")  # the show's position there [show ticks]
+    source_lost_rate: float = float("nan")      # ... and the rate it played on at [show ticks per tick]
 
     @property
     def share(self) -> float:
@@ -143,11 +148,18 @@ def follow_share(records: np.ndarray) -> FollowShare:
     lost = (records["flags"] & FLAG_UNFOLLOWED) != 0
     heard = np.flatnonzero(np.isfinite(records["live_loudness"]))
     first = int(heard[0]) if len(heard) else len(states)                # [tick]
-    return FollowShare(ticks=len(states), before_music=first,
-                       searching=int(np.sum(np.isin(states[first:], (SEARCHING, WAITING)))),
+    searching = np.isin(states, (SEARCHING, WAITING)) & (np.arange(len(states)) >= first)
+    gone = np.flatnonzero(records["flags"] & FLAG_SOURCE_LOST)          # latched: to the end
+    at, where, rate = None, float("nan"), float("nan")
+    if len(gone):
+        at = int(gone[0])
+        searching[at:] = True
+        where, rate = float(records["position"][at]), float(records["rate"][at])
+    return FollowShare(ticks=len(states), before_music=first, searching=int(np.sum(searching)),
                        unfollowed=int(np.sum(lost)),
                        losses=int(np.sum(np.diff(np.concatenate([[False], lost]).astype(np.int8)) == 1)),
-                       locked=bool(np.any(states == LOCKED)))
+                       locked=bool(np.any(states == LOCKED)), source_lost=at,
+                       source_lost_position=where, source_lost_rate=rate)
 
 
 def share_line(s: FollowShare, period: float, on_lost: str) -> str:
@@ -155,7 +167,16 @@ def share_line(s: FollowShare, period: float, on_lost: str) -> str:
     return (f"  music not followed: {s.share:.0%} of the show searching or waiting for it "
             f"({s.searching * period:.2f} s "
             f"from the first live frame at {s.before_music * period:.2f} s), {s.unfollowed * period:.2f} s "
-            f"of it after the first place, lost {s.losses} time(s); on_lost {on_lost}")
+            f"of it after the first place, lost {s.losses} time(s); on_lost {on_lost}"
+            + ("" if s.source_lost is None else "\n" + source_lost_line(s, period, on_lost)))
+
+
+def source_lost_line(s: FollowShare, period: float, on_lost: str) -> str:
+    """The summary line when the live source was lost (s.source_lost is a tick)."""
+    doing = (f"the figure held the show at {s.source_lost_position * period:.2f} s" if on_lost == "hold"
+             else f"the show played on at rate {s.source_lost_rate:.3f}")
+    return (f"  live source lost at show time {s.source_lost * period:.2f} s: not followed from "
+            f"then to the end ({(s.ticks - s.source_lost) * period:.2f} s; on_lost {on_lost}: {doing})")
 
 
 def verdict_line(s: FollowShare) -> str | None:

@@ -351,6 +351,100 @@ static void test_on_lost(void)
           "unknown on_lost accepted");
 }
 
+/* The source lost (mar_engine_source_lost) while the follower follows: from
+ * the next tick to the end every record carries MAR_FLAG_SOURCE_LOST and
+ * MAR_FLAG_UNFOLLOWED, none before; the frames that still come do not bring
+ * the show back. Hold stands at the last followed position, the flywheel
+ * runs on at the last followed rate; a seek places the show (a blend). An
+ * engine without a follower only flags it. No tick allocates. */
+static void test_source_lost(void)
+{
+    enum { TICKS = 3000, FOLLOWED = 500, LOST_AT = 20 + FOLLOWED, AFTER = 300, SEEK = 2000 };
+    static double show[TICKS], loud[TICKS];
+    double level = 0.0;
+    for (int k = 0; k < TICKS; k++) {
+        level = 0.98 * level + uniform(-1.0, 1.0);
+        loud[k] = 0.01 * pow(10.0, (2.0 * level + (k % 25 < 4 ? 15.0 : 0.0)) / 20.0);
+        show[k] = 0.5 * sin(6.283185307179586 * k / 300.0);
+    }
+    mar_axis axis = { .limits = { -1, 1, 5, 100 }, .start = show[500], .address = { 1, 0, 100, 0 } };
+    for (int hold = 0; hold <= 1; hold++) {
+        mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
+                                   .record_slots = 2048, .loudness_slots = 16, .follow = 1,
+                                   .follow_cue = NAN,
+                                   .follow_on_lost = hold ? MAR_ON_LOST_HOLD : MAR_ON_LOST_FLYWHEEL };
+        mar_follow_default_options(&opt.follow_opt);
+        int status;
+        mar_engine *e = mar_engine_create(&opt, &axis, 1, show, TICKS, loud, NULL, &status);
+        CHECK(e != NULL, "create: %d", status);
+        if (!e)
+            return;
+        size_t rs = mar_engine_record_size(e);
+        unsigned char *buf = malloc(rs * 2048);
+        long before = allocations;
+        mar_engine_step(e, 20);
+        mar_engine_seek(e, 500.0);
+        for (int k = 0; k < FOLLOWED + AFTER; k++) {
+            if (20 + k == LOST_AT)
+                mar_engine_source_lost(e);      /* applies at tick LOST_AT */
+            mar_engine_push_loudness(e, loud[500 + k]);     /* the frames go on: stale, not trusted */
+            mar_engine_step(e, 1);
+        }
+        mar_engine_seek(e, (double)SEEK);
+        mar_engine_step(e, 100);
+        CHECK(allocations == before, "source lost %d: ticks allocated %ld times", hold, allocations - before);
+        size_t n = mar_engine_drain_records(e, buf, 2048);
+        CHECK(n == 20 + FOLLOWED + AFTER + 100, "recorded %zu", n);
+        mar_record r, prev = { 0 }, followed = { 0 };
+        for (size_t i = 0; i < n; i++) {
+            memcpy(&r, buf + i * rs, sizeof r);
+            int lost = (int)i >= LOST_AT;
+            CHECK(!!(r.flags & MAR_FLAG_SOURCE_LOST) == lost && (!lost || (r.flags & MAR_FLAG_UNFOLLOWED)),
+                  "source lost %d tick %zu: flags 0x%x", hold, i, r.flags);
+            if ((int)i == LOST_AT - 1) {
+                followed = r;
+                CHECK(r.follow_state == MAR_FOLLOW_LOCKED && r.rate > 0.9, "not locked before the loss: state %d",
+                      r.follow_state);
+            }
+            if (lost && (int)i < 20 + FOLLOWED + AFTER) {
+                if (hold)
+                    CHECK(r.position == followed.position && r.rate == 0.0, "hold tick %zu: p %g r %g",
+                          i, r.position, r.rate);
+                else
+                    CHECK(r.rate == followed.rate && fabs(r.position - prev.position - followed.rate) < 1e-9,
+                          "flywheel tick %zu: p %g (was %g), r %g (last %g)", i, r.position, prev.position,
+                          r.rate, followed.rate);
+            }
+            if ((int)i == 20 + FOLLOWED + AFTER)
+                CHECK(r.position == SEEK && (r.flags & MAR_FLAG_MOVING), "seek after the loss: p %g, flags 0x%x",
+                      r.position, r.flags);
+            prev = r;
+        }
+        free(buf);
+        mar_engine_destroy(e);
+    }
+    mar_engine_options plain = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
+                                 .record_slots = 64, .loudness_slots = 4 };
+    int status;
+    mar_engine *e = mar_engine_create(&plain, &axis, 1, show, TICKS, loud, NULL, &status);
+    mar_engine_step(e, 3);
+    mar_engine_source_lost(e);
+    mar_engine_source_lost(e);
+    mar_engine_step(e, 3);
+    mar_record recs[6];
+    size_t rs = mar_engine_record_size(e), n;
+    unsigned char pbuf[6 * sizeof(mar_record) + 6 * sizeof(double)];
+    n = mar_engine_drain_records(e, pbuf, 6);
+    for (size_t i = 0; i < n; i++) {
+        memcpy(&recs[i], pbuf + i * rs, sizeof recs[i]);
+        CHECK(!!(recs[i].flags & MAR_FLAG_SOURCE_LOST) == (i >= 3) && !(recs[i].flags & MAR_FLAG_UNFOLLOWED)
+              && recs[i].position == (double)i, "no follower, tick %zu: flags 0x%x, p %g", i, recs[i].flags,
+              recs[i].position);
+    }
+    CHECK(n == 6, "recorded %zu", n);
+    mar_engine_destroy(e);
+}
+
 static void test_ring_and_hist(void)
 {
     mar_ring r;
@@ -413,6 +507,7 @@ int main(void)
     test_bad_inputs();
     test_sink();
     test_on_lost();
+    test_source_lost();
     test_ring_and_hist();
     test_rtloop();
     if (failures) {
