@@ -173,7 +173,9 @@ def share_line(s: FollowShare, period: float, on_lost: str) -> str:
 
 def source_lost_line(s: FollowShare, period: float, on_lost: str) -> str:
     """The summary line when the live source was lost (s.source_lost is a tick)."""
-    doing = (f"the figure held the show at {s.source_lost_position * period:.2f} s" if on_lost == "hold"
+    at = f"{s.source_lost_position * period:.2f} s"
+    doing = (f"the figure held the show at {at}" if on_lost == "hold"
+             else f"the show stood at {at}, rate 0" if s.source_lost_rate == 0.0   # WAITING, PAUSED
              else f"the show played on at rate {s.source_lost_rate:.3f}")
     return (f"  live source lost at show time {s.source_lost * period:.2f} s: not followed from "
             f"then to the end ({(s.ticks - s.source_lost) * period:.2f} s; on_lost {on_lost}: {doing})")

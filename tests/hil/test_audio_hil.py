@@ -16,6 +16,7 @@ import pytest
 from audio_support import (SINK, play_into_sink, pulse_device, recording_env, start_server,
                            stop_server)
 from hil_support import dance_from_home
+from marionette._core import FLAG_SOURCE_LOST, FLAG_UNFOLLOWED
 from marionette.bench.music import synthesize
 from marionette.config import load_config
 from marionette.live_audio import LiveLoudness, _choose, input_devices
@@ -28,6 +29,10 @@ T = 0.020                       # tick period of the bundled figure [s]
 # 1.0 to 2.0 s after the recording starts, the lock 3.9 to 5.3 s after the
 # first frame (pop, seed 5, from its start)
 LOCK_WITHIN = 8.0               # after the first frame [s]
+# from the server's kill to the first flight record that says the source was
+# lost: PortAudio's stream ends (or 0.5 s of no audio), the watchdog's next
+# look (0.1 s) and its wait for PortAudio's lines (0.1 s), then a tick
+LOST_WITHIN = 0.6               # [s]
 
 
 @pytest.fixture(scope="module")
@@ -141,21 +146,38 @@ def test_the_show_follows_music_from_the_sound_card(pulse, music, tmp_path):
     assert abs(np.median(rec["rate"][after]) - 1.0) < 0.01
 
 
-def test_a_server_killed_mid_show_is_one_clear_line_and_exit_1(pulse, music, server_back):
+def test_a_server_killed_mid_show_is_one_clear_line_and_exit_1(pulse, music, server_back, tmp_path):
     _, show = music
-    proc = play_cli(show, "pulse", 300)                             # 6 s
+    flight = tmp_path / "flight.bin"
+    proc = play_cli(show, "pulse", 300, record=flight)              # 6 s
     time.sleep(3.5)
     assert proc.poll() is None
+    killed = time.monotonic()                       # CLOCK_MONOTONIC, as the records' time [s]
     stop_server()
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 1, (out, err)
     lines = err.strip().splitlines()
-    assert len(lines) == 1, err                     # no PortAudio lines, no traceback
+    # no PortAudio lines, no traceback: the source's line, then the engine's
+    # (the music is not followed from the next tick on, on_lost applies)
+    assert len(lines) == 2, err
     assert lines[0].startswith("audio input 'pulse' lost: the stream ended by itself"), lines[0]
+    assert lines[1].startswith("music not followed from show time "), lines[1]
+    assert "on_lost flywheel: the show plays on at the last rate" in lines[1], lines[1]
     assert "Traceback" not in err
     # the show went on to its end, and the summary says what was lost
     assert "real time: 300 ticks" in out, out
     assert "audio input 'pulse':" in out and "LOST: the stream ended by itself" in out, out
+    assert "  live source lost at show time " in out, out
+    # the flight record says so on every tick from the loss to the end, none before
+    _, rec = read_flight_record(flight)
+    assert len(rec) == 300
+    t = rec["time_ns"] * 1e-9 - killed                                      # [s]
+    flagged = (rec["flags"] & FLAG_SOURCE_LOST) != 0
+    assert flagged.any(), "the flight record never says the source was lost"
+    first = int(np.argmax(flagged))
+    assert np.all(flagged[first:]) and np.all(rec["flags"][first:] & FLAG_UNFOLLOWED)
+    print(f"source lost flagged {t[first]:.3f} s after the kill ({first} of 300 ticks)")
+    assert 0.0 < t[first] < LOST_WITHIN, t[first]
 
 
 def test_a_silent_source_is_lost_after_half_a_second(pulse, monkeypatch):
