@@ -266,6 +266,40 @@ static void test_sink(void)
     mar_engine_destroy(e);
 }
 
+/* The music of the lost-music tests: a wandering level with notes on it
+ * [full scale], and a 6 s sine to show [unit]. */
+static void lost_music(double *show, double *loud, int n)
+{
+    double level = 0.0;
+    for (int k = 0; k < n; k++) {
+        level = 0.98 * level + uniform(-1.0, 1.0);
+        loud[k] = 0.01 * pow(10.0, (2.0 * level + (k % 25 < 4 ? 15.0 : 0.0)) / 20.0);
+        show[k] = 0.5 * sin(6.283185307179586 * k / 300.0);
+    }
+}
+
+static mar_axis lost_axis(const double *show)
+{
+    mar_axis axis = { .limits = { -1, 1, 5, 100 }, .start = show[500], .address = { 1, 0, 100, 0 } };
+    return axis;
+}
+
+/* One axis following loud from an unknown start, 2048 records; NULL (a
+ * failed check) if it cannot be made. */
+static mar_engine *following_engine(const mar_axis *axis, const double *show, const double *loud, size_t n,
+                                    int hold)
+{
+    mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
+                               .record_slots = 2048, .loudness_slots = 16, .follow = 1,
+                               .follow_cue = NAN,
+                               .follow_on_lost = hold ? MAR_ON_LOST_HOLD : MAR_ON_LOST_FLYWHEEL };
+    mar_follow_default_options(&opt.follow_opt);
+    int status;
+    mar_engine *e = mar_engine_create(&opt, axis, 1, show, n, loud, NULL, &status);
+    CHECK(e != NULL, "create: %d", status);
+    return e;
+}
+
 /* The music lost: the live frames follow the stored loudness from a known
  * start (a seek), then turn to noise that matches no place, so the follower
  * ends up SEARCHING after it had a place. MAR_FLAG_UNFOLLOWED marks exactly
@@ -277,22 +311,10 @@ static void test_on_lost(void)
 {
     enum { TICKS = 3000, FOLLOWED = 600, NOISE = 600, AFTER = 100 };
     static double show[TICKS], loud[TICKS];
-    double level = 0.0;
-    for (int k = 0; k < TICKS; k++) {          /* a wandering level with notes on it [full scale] */
-        level = 0.98 * level + uniform(-1.0, 1.0);
-        loud[k] = 0.01 * pow(10.0, (2.0 * level + (k % 25 < 4 ? 15.0 : 0.0)) / 20.0);
-        show[k] = 0.5 * sin(6.283185307179586 * k / 300.0);   /* a 6 s sine [unit] */
-    }
-    mar_axis axis = { .limits = { -1, 1, 5, 100 }, .start = show[500], .address = { 1, 0, 100, 0 } };
+    lost_music(show, loud, TICKS);
+    mar_axis axis = lost_axis(show);
     for (int hold = 0; hold <= 1; hold++) {
-        mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
-                                   .record_slots = 2048, .loudness_slots = 16, .follow = 1,
-                                   .follow_cue = NAN,
-                                   .follow_on_lost = hold ? MAR_ON_LOST_HOLD : MAR_ON_LOST_FLYWHEEL };
-        mar_follow_default_options(&opt.follow_opt);
-        int status;
-        mar_engine *e = mar_engine_create(&opt, &axis, 1, show, TICKS, loud, NULL, &status);
-        CHECK(e != NULL, "create: %d", status);
+        mar_engine *e = following_engine(&axis, show, loud, TICKS, hold);
         if (!e)
             return;
         size_t rs = mar_engine_record_size(e);
@@ -361,22 +383,10 @@ static void test_source_lost(void)
 {
     enum { TICKS = 3000, FOLLOWED = 500, LOST_AT = 20 + FOLLOWED, AFTER = 300, SEEK = 2000 };
     static double show[TICKS], loud[TICKS];
-    double level = 0.0;
-    for (int k = 0; k < TICKS; k++) {
-        level = 0.98 * level + uniform(-1.0, 1.0);
-        loud[k] = 0.01 * pow(10.0, (2.0 * level + (k % 25 < 4 ? 15.0 : 0.0)) / 20.0);
-        show[k] = 0.5 * sin(6.283185307179586 * k / 300.0);
-    }
-    mar_axis axis = { .limits = { -1, 1, 5, 100 }, .start = show[500], .address = { 1, 0, 100, 0 } };
+    lost_music(show, loud, TICKS);
+    mar_axis axis = lost_axis(show);
     for (int hold = 0; hold <= 1; hold++) {
-        mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_LINEAR,
-                                   .record_slots = 2048, .loudness_slots = 16, .follow = 1,
-                                   .follow_cue = NAN,
-                                   .follow_on_lost = hold ? MAR_ON_LOST_HOLD : MAR_ON_LOST_FLYWHEEL };
-        mar_follow_default_options(&opt.follow_opt);
-        int status;
-        mar_engine *e = mar_engine_create(&opt, &axis, 1, show, TICKS, loud, NULL, &status);
-        CHECK(e != NULL, "create: %d", status);
+        mar_engine *e = following_engine(&axis, show, loud, TICKS, hold);
         if (!e)
             return;
         size_t rs = mar_engine_record_size(e);
