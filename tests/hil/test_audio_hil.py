@@ -1,7 +1,8 @@
 """The live sound-card source through a real audio stack: music played into
 a PulseAudio null sink is recorded from its monitor by PortAudio (ALSA's
 'pulse' device) and drives the engine's follower; killing the server
-mid-show is reported once, clearly, and makes `play` exit 1. No part of
+mid-show is reported once, clearly, reaches the engine (the flight record
+says the source was lost from then on) and makes `play` exit 1. No part of
 PortAudio is replaced (audio_support.py sets the stack up)."""
 import os
 import signal
@@ -146,7 +147,7 @@ def test_the_show_follows_music_from_the_sound_card(pulse, music, tmp_path):
     assert abs(np.median(rec["rate"][after]) - 1.0) < 0.01
 
 
-def test_a_server_killed_mid_show_is_one_clear_line_and_exit_1(pulse, music, server_back, tmp_path):
+def test_a_server_killed_mid_show_is_reported_recorded_and_exit_1(pulse, music, server_back, tmp_path):
     _, show = music
     flight = tmp_path / "flight.bin"
     proc = play_cli(show, "pulse", 300, record=flight)              # 6 s
