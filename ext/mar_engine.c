@@ -156,9 +156,12 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
         ok = (*status = mar_ring_init(&e->records, mar_engine_record_size(e), opt->record_slots)) == 0;
     if (ok)
         ok = (*status = mar_ring_init(&e->loudness_in, sizeof(live_frame), opt->loudness_slots)) == 0;
-    if (ok && opt->follow)      /* refuses a show without finite, non-negative loudness (and onsets) */
-        ok = (e->follow = mar_follow_create_onsets(&opt->follow_opt, e->loudness, onsets, n_ticks,
+    if (ok && opt->follow) {    /* refuses a show without finite, non-negative loudness (and onsets) */
+        mar_follow_options follow_opt = opt->follow_opt;
+        follow_opt.tick_period = opt->period;       /* the follower steps at the engine's tick */
+        ok = (e->follow = mar_follow_create_onsets(&follow_opt, e->loudness, onsets, n_ticks,
                                                    status)) != NULL;
+    }
     if (!ok) {
         mar_engine_destroy(e);
         return NULL;

@@ -187,8 +187,21 @@ typedef struct {
     uint64_t sweep;             /* sweep that last scored it */
 } cand;
 
+/* The options in ticks of opt.tick_period, as the step uses them (made at create). */
+typedef struct {
+    double latency;             /* [ticks] */
+    size_t window, min_window, verify_window, lock_window, paper_window;  /* [ticks] */
+    size_t search_block;        /* [ticks] */
+    size_t search_window;       /* [search blocks] */
+    double rate_step;           /* the search's grid step, widened to at most MAX_RATES rates [1] */
+    double hold_after, search_after, lost_after, quiet_lost_after, pause_after;  /* [ticks] */
+    double meas_noise;          /* [stored ticks] */
+    double rate_var;            /* the rate's variance growth per tick [1] */
+} tick_options;
+
 struct mar_follow {
-    mar_follow_options opt;
+    mar_follow_options opt;     /* as given [s] */
+    tick_options tk;            /* ... in ticks */
     size_t n;                   /* stored frames */
     long pad;                   /* padding frames before and after the stored feature */
     double *sf_buf, *sf;        /* stored feature sf[-pad .. n + pad) */
@@ -308,74 +321,87 @@ struct mar_follow {
     mar_follow_counters c;
 };
 
+#define OPTION_INFO(name, type, def, lo, hi, unit, why) \
+    {#name, MAR_FOLLOW_KIND_##type, offsetof(mar_follow_options, name), def, lo, hi, unit, why},
+const mar_follow_option_info mar_follow_option_table[] = {MAR_FOLLOW_OPTIONS(OPTION_INFO)};
+#undef OPTION_INFO
+const size_t mar_follow_option_count = sizeof mar_follow_option_table / sizeof mar_follow_option_table[0];
+
 void mar_follow_default_options(mar_follow_options *o)
 {
     memset(o, 0, sizeof *o);
-    o->mode = MAR_FOLLOW_SMOOTH;
-    o->rate_min = 0.90;
-    o->rate_max = 1.10;
-    o->delay = 0.0;
-    o->range_db = 25.0;
-    o->window = 200;            /* 4 s */
-    o->min_window = 40;         /* 0.8 s */
-    o->verify_window = 250;     /* 5 s */
-    o->lock_window = 100;       /* 2 s */
-    o->paper_window = 25;       /* 0.5 s */
-    o->coarse = 4;              /* 80 ms blocks */
-    o->search_window = 32;      /* 2.56 s */
-    o->rate_step = 0.03;
-    o->search_budget = 512;
-    o->track_threshold = 0.4;
-    o->lock_threshold = 0.6;
-    o->lock_margin = 0.3;
-    o->hold_after = 25;         /* 0.5 s */
-    o->search_after = 25;       /* 0.5 s */
-    o->lost_after = 150;        /* 3 s */
-    o->quiet_lost_after = 1500; /* 30 s */
-    o->pause_after = 8;         /* 0.16 s */
-    o->quiet_db = 1.0;
-    o->meas_noise = 0.5;
-    o->rate_noise = 2e-4;
-    o->onset_weight = 12.0;
+    o->tick_period = 0.020;
+#define OPTION_DEFAULT(name, type, def, lo, hi, unit, why) o->name = def;
+    MAR_FOLLOW_OPTIONS(OPTION_DEFAULT)
+#undef OPTION_DEFAULT
 }
 
-static int check_options(const mar_follow_options *o)
+/* A time [s] in ticks of period [s]; within 1e-9 of a whole tick it is
+ * that tick (0.5 s / 0.02 s is 25, not 24.999...). */
+static double ticks_of(double seconds, double period)
 {
-    if (o->mode != MAR_FOLLOW_SMOOTH && o->mode != MAR_FOLLOW_PAPER)
-        return -EINVAL;
-    if (!(o->rate_min >= 0.25 && o->rate_min <= 1.0 && o->rate_max >= 1.0 && o->rate_max <= 4.0))
-        return -EINVAL;
-    if (!(o->delay >= 0.0 && o->delay <= 1000.0) || !(o->range_db > 0.0 && o->range_db <= 200.0))
-        return -EINVAL;
-    if (o->min_window < 4 || o->window < o->min_window || o->window > 8192)
-        return -EINVAL;
-    if (o->verify_window < o->min_window || o->verify_window > 8192)
-        return -EINVAL;
-    if (o->lock_window < o->min_window || o->lock_window > o->verify_window)
-        return -EINVAL;
-    if (o->paper_window < 4 || o->paper_window > 8192)
-        return -EINVAL;
-    if (o->coarse < 1 || o->coarse > 64 || o->search_window < MIN_SEARCH_BLOCKS || o->search_window > 1024)
-        return -EINVAL;
-    if (!(o->rate_step > 0.0) || (o->rate_max - o->rate_min) / o->rate_step + 1.0 > MAX_RATES)
-        return -EINVAL;
-    if (o->search_budget < 1 || o->search_budget > 1000000)
-        return -EINVAL;
-    if (!(o->track_threshold > -1.0 && o->track_threshold < 1.0)
-        || !(o->lock_threshold > -1.0 && o->lock_threshold < 1.0)
-        || !(o->lock_margin >= 0.0 && o->lock_margin < 2.0))
-        return -EINVAL;
-    if (!(o->hold_after >= 0.0) || !(o->search_after >= 0.0) || !(o->lost_after >= 0.0)
-        || !(o->quiet_lost_after >= 0.0) || !(o->pause_after >= 1.0))
-        return -EINVAL;
-    if (!(o->hold_after < 1e12 && o->search_after < 1e12 && o->lost_after < 1e12
-          && o->quiet_lost_after < 1e12 && o->pause_after < 1e12))
-        return -EINVAL;
-    if (!(o->quiet_db >= 0.0 && o->quiet_db < 100.0) || !(o->meas_noise > 0.0 && o->meas_noise < 1e6)
-        || !(o->rate_noise >= 0.0 && o->rate_noise < 1.0)
-        || !(o->onset_weight >= 0.0 && o->onset_weight < 100.0))
-        return -EINVAL;
+    double t = seconds / period, whole = nearbyint(t);
+    return fabs(t - whole) < 1e-9 ? whole : t;
+}
+
+static size_t whole_ticks(double seconds, double period) { return (size_t)nearbyint(seconds / period); }
+
+/* The options in ranges (the table's), then in ticks and against each
+ * other: 0, or -EINVAL and *problem says which and why. */
+static int tick_options_of(const mar_follow_options *o, tick_options *tk, const char **problem)
+{
+    const double T = o->tick_period;
+#define REFUSE(why)        \
+    do {                   \
+        *problem = why;    \
+        return -EINVAL;    \
+    } while (0)
+    if (!(T >= 0.001 && T <= 1.0))
+        REFUSE("tick_period is outside [0.001, 1] s");
+#define OPTION_CHECK(name, type, def, lo, hi, unit, why) \
+    if (!(o->name >= (type)(lo) && o->name <= (type)(hi))) \
+        REFUSE(#name " is outside its range");
+    MAR_FOLLOW_OPTIONS(OPTION_CHECK)
+#undef OPTION_CHECK
+    tk->latency = o->latency / T;
+    tk->window = whole_ticks(o->window, T);
+    tk->min_window = whole_ticks(o->min_window, T);
+    tk->verify_window = whole_ticks(o->verify_window, T);
+    tk->lock_window = whole_ticks(o->lock_window, T);
+    tk->paper_window = whole_ticks(o->paper_window, T);
+    tk->search_block = whole_ticks(o->search_block, T);
+    tk->search_window = tk->search_block ? whole_ticks(o->search_window, T * (double)tk->search_block) : 0;
+    tk->hold_after = ticks_of(o->hold_after, T);
+    tk->search_after = ticks_of(o->search_after, T);
+    tk->lost_after = ticks_of(o->lost_after, T);
+    tk->quiet_lost_after = ticks_of(o->quiet_lost_after, T);
+    tk->pause_after = fmax(1.0, ticks_of(o->pause_after, T));
+    tk->meas_noise = o->meas_noise / T;
+    tk->rate_var = o->rate_walk * T;
+    /* at most MAX_RATES rates, whatever the rate range */
+    tk->rate_step = fmax(o->rate_step, (o->rate_max - o->rate_min) / (MAX_RATES - 1) * 1.000001);
+    if (tk->min_window < 4 || tk->paper_window < 4)
+        REFUSE("min_window and paper_window must be at least 4 ticks");
+    if (tk->window < tk->min_window || tk->window > 8192 || tk->verify_window < tk->min_window
+        || tk->verify_window > 8192)
+        REFUSE("window and verify_window must lie between min_window and 8192 ticks");
+    if (tk->lock_window < tk->min_window || tk->lock_window > tk->verify_window)
+        REFUSE("lock_window must lie between min_window and verify_window");
+    if (tk->paper_window > 8192)
+        REFUSE("paper_window must be at most 8192 ticks");
+    if (tk->search_block < 1 || tk->search_block > 64)
+        REFUSE("search_block must be 1 to 64 ticks");
+    if (tk->search_window < MIN_SEARCH_BLOCKS || tk->search_window > 1024)
+        REFUSE("search_window must be 12 to 1024 search blocks");
+#undef REFUSE
+    *problem = NULL;
     return 0;
+}
+
+int mar_follow_check_options(const mar_follow_options *opt, const char **problem)
+{
+    tick_options tk;
+    return tick_options_of(opt, &tk, problem);
 }
 
 static double level_db(double x) { return 20.0 * log10(x + TINY); }
@@ -421,7 +447,9 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
                                      const double *onset, size_t n_stored, int *status)
 {
     *status = -EINVAL;
-    if (!opt || check_options(opt) < 0 || !stored || n_stored < 2 || n_stored > ((size_t)1 << 28))
+    tick_options tk;
+    const char *problem;
+    if (!opt || tick_options_of(opt, &tk, &problem) < 0 || !stored || n_stored < 2 || n_stored > ((size_t)1 << 28))
         return NULL;
     for (size_t i = 0; i < n_stored; i++)
         if (!isfinite(stored[i]) || stored[i] < 0.0 || (onset && !(isfinite(onset[i]) && onset[i] >= 0.0)))
@@ -432,14 +460,15 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
     if (!f)
         return NULL;
     f->opt = *opt;
+    f->tk = tk;
     f->n = n_stored;
     f->onsets = onset != NULL;
-    size_t longest = opt->window > opt->verify_window ? opt->window : opt->verify_window;
+    size_t longest = tk.window > tk.verify_window ? tk.window : tk.verify_window;
     if (longest < LONG_VERIFY)
         longest = LONG_VERIFY;
-    if (opt->paper_window > longest)
-        longest = opt->paper_window;
-    size_t search_span = (size_t)((double)(opt->search_window + 2) * (double)opt->coarse / opt->rate_min) + 2;
+    if (tk.paper_window > longest)
+        longest = tk.paper_window;
+    size_t search_span = (size_t)((double)(tk.search_window + 2) * (double)tk.search_block / opt->rate_min) + 2;
     if (search_span > longest)
         longest = search_span;
     f->hcap = 64;
@@ -447,13 +476,13 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
         f->hcap <<= 1;
     f->hmask = f->hcap - 1;
     f->pad = (long)((double)f->hcap * opt->rate_max) + 4 * MAX_LAGS + 8;
-    f->D = opt->coarse;
+    f->D = tk.search_block;
     f->nc = (n_stored + f->D - 1) / f->D;
-    f->cpad = (long)opt->search_window + 4;
+    f->cpad = (long)tk.search_window + 4;
     f->scap = (size_t)((double)f->hcap * opt->rate_max) + 8;
 
     size_t nf = n_stored + 2 * (size_t)f->pad, ncb = f->nc + 2 * (size_t)f->cpad;
-    f->n_rates = (size_t)floor((opt->rate_max - opt->rate_min) / opt->rate_step + 1e-9) + 1;
+    f->n_rates = (size_t)floor((opt->rate_max - opt->rate_min) / tk.rate_step + 1e-9) + 1;
     f->sf_buf = malloc(nf * sizeof(double));
     f->sdb_buf = malloc(nf * sizeof(double));
     f->p1 = malloc((nf + 1) * sizeof(double));
@@ -468,9 +497,9 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
     f->lf = malloc(f->hcap * sizeof(double));
     f->ldb = malloc(f->hcap * sizeof(double));
     f->lpos = malloc(f->hcap * sizeof(double));
-    f->lc_cap = (size_t)ceil((double)opt->search_window / opt->rate_min) + 4;
+    f->lc_cap = (size_t)ceil((double)tk.search_window / opt->rate_min) + 4;
     f->lc = malloc(f->lc_cap * sizeof(double));
-    f->u = malloc(f->n_rates * opt->search_window * sizeof(double));
+    f->u = malloc(f->n_rates * tk.search_window * sizeof(double));
     f->rs = malloc(f->scap * sizeof(double));
     double *sorted = malloc(n_stored * sizeof(double));
     if (!f->sf_buf || !f->sdb_buf || !f->p1 || !f->p2 || !f->of_buf || !f->o1 || !f->o2 || !f->lo
@@ -529,7 +558,7 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
         f->c2[q + 1] = f->c2[q] + f->sc_buf[q] * f->sc_buf[q];
     }
     for (size_t k = 0; k < f->n_rates; k++)
-        f->rates[k] = opt->rate_min + opt->rate_step * (double)k;
+        f->rates[k] = opt->rate_min + tk.rate_step * (double)k;
 
     for (size_t i = 0; i < f->hcap; i++)
         f->lf[i] = f->lo[i] = f->ldb[i] = NAN, f->lpos[i] = 0.0;
@@ -806,13 +835,13 @@ static void prepare_search(mar_follow *f)
     /* blocks of the window in stored spacing: m in [0, m_eff) needs live block
      * (m + 0.5) / r - 0.5 < nblocks - 1 for the slowest rate */
     size_t m_eff = (size_t)floor(((double)nblocks - 0.5) * f->opt.rate_min - 0.5);
-    if (m_eff > f->opt.search_window)
-        m_eff = f->opt.search_window;
+    if (m_eff > f->tk.search_window)
+        m_eff = f->tk.search_window;
     if (m_eff < MIN_SEARCH_BLOCKS || valid_blocks < MIN_SEARCH_BLOCKS)
         return;
     double spread_sum = 0.0;
     for (size_t k = 0; k < f->n_rates; k++) {
-        double r = f->rates[k], *u = f->u + k * f->opt.search_window;
+        double r = f->rates[k], *u = f->u + k * f->tk.search_window;
         double sum = 0.0;
         size_t cnt = 0;
         for (size_t m = 0; m < m_eff; m++) {
@@ -844,7 +873,7 @@ static void prepare_search(mar_follow *f)
 static double coarse_score(const mar_follow *f, long o, size_t k)
 {
     const size_t M = f->m_eff;
-    const double *u = f->u + k * f->opt.search_window;
+    const double *u = f->u + k * f->tk.search_window;
     const double *s = f->sc + o - 1;                  /* s[-m] is block o - 1 - m */
     double a0 = 0.0, a1 = 0.0;
     size_t m = 0;
@@ -1005,7 +1034,7 @@ static int half_peaks_ch(mar_follow *f, int onset, double p, double r, size_t ag
 {
     long j0;
     double center;
-    size_t m = ages >= f->opt.min_window ? resample_ch(f, onset ? f->lo : f->lf, p, r, ages, &j0, &center) : 0;
+    size_t m = ages >= f->tk.min_window ? resample_ch(f, onset ? f->lo : f->lf, p, r, ages, &j0, &center) : 0;
     if (m < 16)
         return 0;
     size_t h = m / 2;
@@ -1049,7 +1078,7 @@ static void line_fix(const half_peak hp[2], double *ep, double *er)
 static size_t verify_cap(const mar_follow *f)
 {
     uint64_t waited = !f->located && f->t > f->search_from ? f->t - f->search_from : 0;
-    size_t cap = f->opt.verify_window, limit = cap > LONG_VERIFY ? cap : LONG_VERIFY;
+    size_t cap = f->tk.verify_window, limit = cap > LONG_VERIFY ? cap : LONG_VERIFY;
     if (waited > PATIENT_AFTER)
         cap += (size_t)(waited - PATIENT_AFTER);
     return cap < limit ? cap : limit;
@@ -1166,7 +1195,7 @@ static int lockable_peak(const mar_follow *f, double rho, double kappa)
  * 1/sqrt(frames) below verify_window. */
 static double lock_lead(const mar_follow *f, size_t frames)
 {
-    return f->opt.lock_margin * sqrt((double)f->opt.verify_window / (double)frames);
+    return f->opt.lock_margin * sqrt((double)f->tk.verify_window / (double)frames);
 }
 
 /* The entry to lock on, or NULL: good enough, confirmed, clearly ahead of
@@ -1182,7 +1211,7 @@ static cand *lock_choice(mar_follow *f)
             best = e;
     }
     if (!best || !lockable_peak(f, best->fine, best->kappa) || best->confirmed < LOCK_CONFIRM
-        || usable(f, best->since, f->opt.lock_window) < f->opt.lock_window)
+        || usable(f, best->since, f->tk.lock_window) < f->tk.lock_window)
         return NULL;
     double margin = lock_lead(f, best->frames);
     for (int i = 0; i < POOL; i++) {
@@ -1336,7 +1365,7 @@ static int detect_pause(mar_follow *f, int have)
     }
     /* in a quiet passage evidence is sparse: a few silent frames where music
      * should be heard, and nothing but hiss in between for a second, will do */
-    return (double)f->silent_run >= f->opt.pause_after
+    return (double)f->silent_run >= f->tk.pause_after
         || (f->silent_run >= SPARSE_EVIDENCE && f->t - f->silent_start >= SPARSE_SPAN);
 }
 
@@ -1376,7 +1405,7 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
 
 static void kf_predict(mar_follow *f)
 {
-    double q_r = f->opt.rate_noise * f->opt.rate_noise;
+    double q_r = f->tk.rate_var;
     /* F = [1 1; 0 1] */
     double p00 = f->P00 + 2.0 * f->P01 + f->P11 + 1e-6;
     double p01 = f->P01 + f->P11;
@@ -1390,11 +1419,11 @@ static void kf_predict(mar_follow *f)
  * WIDE_LAGS at most): wide after a resume, narrow while following. */
 static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
 {
-    size_t ages = usable(f, f->seg_start, f->opt.window);
+    size_t ages = usable(f, f->seg_start, f->tk.window);
     /* right after a resume a short window corrects the restart point early
      * (the gate and the probation keep it from doing harm) */
-    size_t min_window = f->probation && RESUME_MIN_WINDOW < f->opt.min_window ? RESUME_MIN_WINDOW
-                                                                               : f->opt.min_window;
+    size_t min_window = f->probation && RESUME_MIN_WINDOW < f->tk.min_window ? RESUME_MIN_WINDOW
+                                                                               : f->tk.min_window;
     *quiet = 0;
     if (ages < min_window) {
         *quiet = 2;                                   /* too little audio yet: no evidence */
@@ -1434,7 +1463,7 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
         }
     }
     double k = kappa / KAPPA_REF;
-    double R = f->opt.meas_noise * f->opt.meas_noise / (k < 1.0 ? (k > 0.01 ? k : 0.01) : 1.0);
+    double R = f->tk.meas_noise * f->tk.meas_noise / (k < 1.0 ? (k > 0.01 ? k : 0.01) : 1.0);
     double S = var + R;
     if (d * d > 9.0 * S + 1.0)                        /* gate: 3 sigma, and at least a tick */
         return 0;
@@ -1459,7 +1488,7 @@ static int track_paper(mar_follow *f, int *quiet, int *step, uint32_t *flags)
 {
     *quiet = 0;
     *step = 1;
-    size_t ages = usable(f, f->seg_start, f->opt.paper_window);
+    size_t ages = usable(f, f->seg_start, f->tk.paper_window);
     if (ages < 8)
         return 0;
     long j0;
@@ -1525,7 +1554,7 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->doubt = f->probation = f->regaining = f->unproven = f->cue_pending = 0;
     f->h_slow = f->h_fast = e->fine;
     f->have_gain = 0;
-    update_gain(f, f->p, f->r, f->opt.verify_window);
+    update_gain(f, f->p, f->r, f->tk.verify_window);
     if (!was_following || fabs(old - f->p) > 2.0)
         *flags |= MAR_FOLLOW_F_JUMP;
     f->c.locks++;
@@ -1794,11 +1823,11 @@ static double best_rival(const double *rho, int lags, double d)
 static double near_peak(mar_follow *f, double centre, double *h_out)
 {
     *h_out = -1.0;
-    size_t ages = usable(f, f->near_from, f->opt.verify_window);
+    size_t ages = usable(f, f->near_from, f->tk.verify_window);
     long j0;
     double c;
-    size_t m = ages >= f->opt.min_window ? resample(f, centre, f->near_r, ages, &j0, &c) : 0;
-    if (m < f->opt.min_window / 2)
+    size_t m = ages >= f->tk.min_window ? resample(f, centre, f->near_r, ages, &j0, &c) : 0;
+    if (m < f->tk.min_window / 2)
         return NAN;
     double rho[2 * NEAR_RIVAL_LAGS + 1], h, kappa;
     int edge;
@@ -1856,7 +1885,7 @@ static void near_search(mar_follow *f, uint32_t *flags)
     if (isnan(f->alt_p) || fabs(f->alt_p - f->near_p) < 2.0 * NEAR_LAGS)
         return;                                       /* no other place, or within reach already */
     double ha, da = near_peak(f, f->alt_p, &ha);
-    size_t m = usable(f, f->near_from, f->opt.verify_window);
+    size_t m = usable(f, f->near_from, f->tk.verify_window);
     if (isnan(da) || fabs(da) > ALT_REACH || fisher(ha) - fisher(h) < lock_lead(f, m > 1 ? m : 1)) {
         f->alt_confirmed = 0;
         return;
@@ -2164,32 +2193,32 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
     if (!f->doubt && f->measured && !quiet && f->h_fast < f->h_slow - DOUBT_DROP && clear_music(f)
         && f->silent_run == 0) {
         f->doubt = 1;
-        uint64_t back = f->opt.window / 2;
+        uint64_t back = f->tk.window / 2;
         start_search(f, f->t + 1 > back ? f->t + 1 - back : 0);
     }
     /* after a resume, the place is on probation until the near search has
      * locked (which ends it) or given up and the tracker has confirmed the
      * place for lock_window / 2 frames; unclear music in that time sends it
      * back to the search */
-    if (f->probation && !f->near && f->probation_ok >= f->opt.lock_window / 2 && f->bad_since == 0
+    if (f->probation && !f->near && f->probation_ok >= f->tk.lock_window / 2 && f->bad_since == 0
         && !f->doubt)
         f->probation = 0;
     /* LOCKED: a measurement confirmed the place since the last (re)start, recently */
-    f->state = since <= f->opt.hold_after && f->measured && !f->doubt && !f->probation && !f->regaining
+    f->state = since <= f->tk.hold_after && f->measured && !f->doubt && !f->probation && !f->regaining
         && !f->unproven && !f->cue_pending ? MAR_FOLLOW_LOCKED : MAR_FOLLOW_HOLDING;
     /* frames from well before the measurements went bad may belong to
      * another place of the tape (a jump): the search starts after them */
     uint64_t bad_start = f->t + 1 - f->bad_since;
-    uint64_t from = bad_start > f->opt.min_window ? bad_start - f->opt.min_window : 0;
-    if ((double)f->bad_since >= f->opt.lost_after || since >= f->opt.quiet_lost_after
+    uint64_t from = bad_start > f->tk.min_window ? bad_start - f->tk.min_window : 0;
+    if ((double)f->bad_since >= f->tk.lost_after || since >= f->tk.quiet_lost_after
         || (f->probation && f->bad_since >= PROBATION_BAD)
-        || (f->regaining && (double)f->regain_bad >= f->opt.lost_after)) {
+        || (f->regaining && (double)f->regain_bad >= f->tk.lost_after)) {
         uint64_t at = f->probation && f->seg_start > from ? f->seg_start : from;
         f->state = MAR_FOLLOW_SEARCHING;
         f->probation = f->doubt = f->regaining = 0;
         stop_search(f);
         start_search(f, at);
-    } else if ((double)f->bad_since >= f->opt.search_after) {
+    } else if ((double)f->bad_since >= f->tk.search_after) {
         start_search(f, from);
         if (!f->regaining)
             f->regaining = 1, f->regain_ok = 0, f->regain_bad = f->bad_since;
@@ -2280,7 +2309,7 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
     f->lpos[ring(f, f->t)] = f->p;
 
     double rate = still ? 0.0 : f->r;
-    double ahead = f->p + rate * f->opt.delay;
+    double ahead = f->p + rate * f->tk.latency;
     out->position = ahead > (double)f->n ? (double)f->n : ahead;
     out->rate = rate;
     out->confidence = f->conf < 0.0 ? 0.0 : f->conf > 1.0 ? 1.0 : f->conf;

@@ -22,7 +22,7 @@
  * Time: "step t" is the t-th call of mar_follow_step since create (0, 1,
  * ...). The frame passed at a step is the live audio of the tick that just
  * ended, [now - T, now). The position returned is where in the taught
- * music the live music is at "now" (plus opt.delay ticks): stored frame j
+ * music the live music is at "now" (plus opt.latency): stored frame j
  * covers taught time [j T, (j + 1) T), so p = 12.5 means 12.5 T into the
  * taught music. In the engine: p is the show position [show ticks].
  *
@@ -59,34 +59,68 @@ enum mar_follow_state {
 #define MAR_FOLLOW_F_RATE_LIMIT 64u /* the rate hit rate_min or rate_max */
 #define MAR_FOLLOW_F_END      128u  /* the position reached the end of the stored music */
 
+/* The follower's options, declared once: X(name, C type, default, lowest,
+ * highest, unit, why). The struct, the defaults, the range checks, the
+ * table the Python binding reads (mar_follow_option_table), the figure
+ * TOML's [follow] keys and the table in docs/music.md all come from this
+ * list. Times are in seconds, whatever the tick: mar_follow_create turns
+ * them into ticks of opt.tick_period. */
+#define MAR_FOLLOW_OPTIONS(X)                                                                        \
+    X(mode, int, MAR_FOLLOW_SMOOTH, 0, 1, "",                                                        \
+      "smooth: fractional position and rate; paper: double or skip one stored sample per tick")      \
+    X(rate_min, double, 0.90, 0.25, 1.0, "1", "slowest playback rate")                              \
+    X(rate_max, double, 1.10, 1.0, 4.0, "1", "fastest playback rate")                               \
+    X(latency, double, 0.0, 0.0, 10.0, "s",                                                         \
+      "from the end of the newest frame's audio to the tick: the answer is p + r * latency")        \
+    X(range_db, double, 25.0, 1.0, 200.0, "dB",                                                     \
+      "loudness kept below a running peak level; quieter detail, hum and noise read as that")       \
+    X(window, double, 4.0, 0.08, 160.0, "s", "tracking correlation window")                         \
+    X(min_window, double, 0.8, 0.08, 160.0, "s", "fewest live frames for a tracking measurement")   \
+    X(verify_window, double, 5.0, 0.08, 160.0, "s", "window that verifies a search candidate")      \
+    X(lock_window, double, 2.0, 0.08, 160.0, "s", "fewest consistent live frames behind a lock")    \
+    X(paper_window, double, 0.5, 0.08, 160.0, "s", "paper mode correlation window")                 \
+    X(search_block, double, 0.08, 0.02, 1.28, "s", "the search averages the music over blocks this long") \
+    X(search_window, double, 2.56, 0.24, 160.0, "s", "live music the search scores a place on")     \
+    X(rate_step, double, 0.03, 0.001, 1.0, "1",                                                     \
+      "search rate grid step (widened to at most 64 rates over the rate range)")                    \
+    X(search_budget, int, 512, 1, 1000000, "1/tick", "search places scored per tick")               \
+    X(track_threshold, double, 0.4, 0.0, 0.99, "1", "correlation a tracking measurement needs")    \
+    X(lock_threshold, double, 0.6, 0.0, 0.99, "1", "correlation a place needs to lock")            \
+    X(lock_margin, double, 0.3, 0.0, 1.9, "Fisher z",                                               \
+      "a lock's lead over any other place, at verify_window (more for shorter windows)")           \
+    X(hold_after, double, 0.5, 0.0, 3600.0, "s", "no good measurement this long: HOLDING")          \
+    X(search_after, double, 0.5, 0.0, 3600.0, "s", "unclear (not quiet) music this long: search beside") \
+    X(lost_after, double, 3.0, 0.0, 3600.0, "s", "unclear music this long while HOLDING: SEARCHING") \
+    X(quiet_lost_after, double, 30.0, 0.0, 3600.0, "s", "quiet music this long while HOLDING: SEARCHING") \
+    X(pause_after, double, 0.16, 0.0, 3600.0, "s",                                                  \
+      "silence where music is expected this long (at least a tick): PAUSED")                        \
+    X(quiet_db, double, 1.0, 0.0, 100.0, "dB", "a live window whose spread is below this is quiet") \
+    X(meas_noise, double, 0.01, 1e-6, 10.0, "s", "tracking measurement noise, 1 sigma")            \
+    X(rate_walk, double, 2e-6, 0.0, 1.0, "1/s",                                                     \
+      "how fast the rate may wander: its variance grows this much per second")                      \
+    X(onset_weight, double, 12.0, 0.0, 100.0, "dB/dB",                                              \
+      "with onsets: onset feature = loudness feature + this times the onset strength")
+
 typedef struct {
-    int mode;                   /* enum mar_follow_mode */
-    double rate_min, rate_max;  /* playback rate limits [stored ticks per tick], 0 < min <= 1 <= max */
-    double delay;               /* from the end of the newest frame's audio to the step [ticks]: output = p + r * delay */
-    double range_db;            /* loudness kept below a running peak level [dB]; quieter reads as that */
-    size_t window;              /* tracking correlation window [ticks] */
-    size_t min_window;          /* fewest live frames for a tracking measurement [ticks] */
-    size_t verify_window;       /* search candidate verification window [ticks] */
-    size_t lock_window;         /* fewest consistent live frames behind a lock [ticks] */
-    size_t paper_window;        /* paper mode correlation window [ticks] */
-    size_t coarse;              /* search decimation [ticks per coarse frame] */
-    size_t search_window;       /* search window [coarse frames] */
-    double rate_step;           /* search rate grid step [stored ticks per tick] */
-    size_t search_budget;       /* (offset, rate) search candidates scored per tick [1] */
-    double track_threshold;     /* correlation a tracking measurement needs [1] */
-    double lock_threshold;      /* correlation a search candidate needs to lock [1] */
-    double lock_margin;         /* ... and its lead over any other place [Fisher z = atanh(rho)],
-                                 * at verify_window frames; times sqrt(verify_window / frames) below */
-    double hold_after;          /* ticks without a good measurement before HOLDING [ticks] */
-    double search_after;        /* unclear (not quiet) ticks before the search runs beside [ticks] */
-    double lost_after;          /* HOLDING ticks (unclear music) before SEARCHING [ticks] */
-    double quiet_lost_after;    /* HOLDING ticks (quiet music) before SEARCHING [ticks] */
-    double pause_after;         /* silent ticks where music is expected before PAUSED [ticks] */
-    double quiet_db;            /* live window spread below this is quiet [dB] */
-    double meas_noise;          /* tracking measurement noise, 1 sigma [stored ticks] */
-    double rate_noise;          /* rate random walk per tick, 1 sigma [stored ticks per tick] */
-    double onset_weight;        /* with onsets: onset feature = feature + this times onset strength [dB/dB] */
+    double tick_period;         /* the follower's step [s]: one stored frame per tick (the engine's own) */
+#define MAR_FOLLOW_OPTION_FIELD(name, type, def, lo, hi, unit, why) type name;
+    MAR_FOLLOW_OPTIONS(MAR_FOLLOW_OPTION_FIELD)
+#undef MAR_FOLLOW_OPTION_FIELD
 } mar_follow_options;
+
+/* An option as the Python binding and the docs read it (one entry per X). */
+enum mar_follow_option_kind { MAR_FOLLOW_KIND_int = 0, MAR_FOLLOW_KIND_double = 1 };
+typedef struct {
+    const char *name;
+    int kind;                   /* enum mar_follow_option_kind: the field's C type */
+    size_t offset;              /* of the field in mar_follow_options [bytes] */
+    double default_value, lo, hi;  /* default, lowest and highest allowed (inclusive) */
+    const char *unit;           /* "s": a time, turned into ticks at create */
+    const char *why;            /* one line */
+} mar_follow_option_info;
+
+extern const mar_follow_option_info mar_follow_option_table[];
+extern const size_t mar_follow_option_count;
 
 typedef struct {
     double position;            /* where the live music is [stored ticks, fractional] */
@@ -122,10 +156,15 @@ typedef struct {
 
 typedef struct mar_follow mar_follow;
 
-/* Defaults that work for music at 20 ms ticks (see mar_follow.c). */
+/* The defaults of the table, at 20 ms ticks. */
 void mar_follow_default_options(mar_follow_options *opt);
 
-/* Checks opt (-EINVAL), copies the stored loudness (n_stored frames, one
+/* 0 when the follower takes opt; -EINVAL when not, and *problem (a static
+ * string) names the option and the rule: the table's ranges, then the
+ * windows in ticks against each other. */
+int mar_follow_check_options(const mar_follow_options *opt, const char **problem);
+
+/* Checks opt (mar_follow_check_options, -EINVAL), copies the stored loudness (n_stored frames, one
  * per tick, linear, finite and >= 0: -EINVAL otherwise; n_stored >= 2) and
  * sizes every buffer (-ENOMEM). The follower starts SEARCHING with the
  * whole piece as candidates. Returns NULL on failure and sets *status. */

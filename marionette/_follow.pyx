@@ -33,32 +33,21 @@ cdef extern from "mar_follow.h" nogil:
         MAR_FOLLOW_F_RATE_LIMIT
         MAR_FOLLOW_F_END
     ctypedef struct mar_follow_options:
-        int mode
-        double rate_min
-        double rate_max
-        double delay
-        double range_db
-        size_t window
-        size_t min_window
-        size_t verify_window
-        size_t lock_window
-        size_t paper_window
-        size_t coarse
-        size_t search_window
-        double rate_step
-        size_t search_budget
-        double track_threshold
-        double lock_threshold
-        double lock_margin
-        double hold_after
-        double search_after
-        double lost_after
-        double quiet_lost_after
-        double pause_after
-        double quiet_db
-        double meas_noise
-        double rate_noise
-        double onset_weight
+        double tick_period
+    ctypedef struct mar_follow_option_info:
+        const char *name
+        int kind
+        size_t offset
+        double default_value
+        double lo
+        double hi
+        const char *unit
+        const char *why
+    const mar_follow_option_info mar_follow_option_table[]
+    const size_t mar_follow_option_count
+    enum:
+        MAR_FOLLOW_KIND_int
+        MAR_FOLLOW_KIND_double
     ctypedef struct mar_follow_out:
         double position
         double rate
@@ -84,6 +73,7 @@ cdef extern from "mar_follow.h" nogil:
     size_t mar_follow_tick(mar_follow *f, const mar_follow_frame *frames, size_t n, int64_t elapsed,
                            mar_follow_out *out)
     void mar_follow_default_options(mar_follow_options *opt)
+    int mar_follow_check_options(const mar_follow_options *opt, const char **problem)
     mar_follow *mar_follow_create(const mar_follow_options *opt, const double *stored, size_t n_stored,
                                   int *status)
     mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double *stored,
@@ -105,76 +95,68 @@ SEARCHING, LOCKED, HOLDING, PAUSED, WAITING = (MAR_FOLLOW_SEARCHING, MAR_FOLLOW_
 FLAGS = {"no_frame": MAR_FOLLOW_F_NO_FRAME, "bad_input": MAR_FOLLOW_F_BAD_INPUT,
          "measured": MAR_FOLLOW_F_MEASURED, "quiet": MAR_FOLLOW_F_QUIET, "jump": MAR_FOLLOW_F_JUMP,
          "search": MAR_FOLLOW_F_SEARCH, "rate_limit": MAR_FOLLOW_F_RATE_LIMIT, "end": MAR_FOLLOW_F_END}
-# option name -> kind: "i" size_t [1 or ticks], "f" double; "mode" is a MODES name
-OPTION_KINDS = {"mode": "mode", "rate_min": "f", "rate_max": "f", "delay": "f", "range_db": "f",
-                "window": "i", "min_window": "i", "verify_window": "i", "lock_window": "i", "paper_window": "i",
-                "coarse": "i", "search_window": "i", "rate_step": "f", "search_budget": "i",
-                "track_threshold": "f", "lock_threshold": "f", "lock_margin": "f",
-                "hold_after": "f", "search_after": "f", "lost_after": "f", "quiet_lost_after": "f",
-                "pause_after": "f", "quiet_db": "f", "meas_noise": "f", "rate_noise": "f",
-                "onset_weight": "f"}
+
+
+def _option_table():
+    """The C table (MAR_FOLLOW_OPTIONS in ext/mar_follow.h): name -> dict of
+    kind ("int" or "double"), default, lo, hi (allowed, inclusive), unit
+    ("s": a time, turned into ticks at create) and why (one line)."""
+    table = {}
+    cdef size_t i
+    for i in range(mar_follow_option_count):
+        info = &mar_follow_option_table[i]
+        table[info.name.decode()] = {
+            "kind": "int" if info.kind == MAR_FOLLOW_KIND_int else "double",
+            "default": info.default_value, "lo": info.lo, "hi": info.hi,
+            "unit": info.unit.decode(), "why": info.why.decode(), "offset": info.offset}
+    return table
+
+
+OPTIONS = _option_table()
 
 
 cdef dict _options_dict(mar_follow_options *o):
-    mode = [k for k, v in MODES.items() if v == o.mode][0]
-    return {"mode": mode, "rate_min": o.rate_min, "rate_max": o.rate_max, "delay": o.delay,
-            "range_db": o.range_db, "window": o.window, "min_window": o.min_window,
-            "verify_window": o.verify_window, "lock_window": o.lock_window, "paper_window": o.paper_window, "coarse": o.coarse,
-            "search_window": o.search_window, "rate_step": o.rate_step,
-            "search_budget": o.search_budget, "track_threshold": o.track_threshold,
-            "lock_threshold": o.lock_threshold, "lock_margin": o.lock_margin,
-            "hold_after": o.hold_after, "search_after": o.search_after, "lost_after": o.lost_after,
-            "quiet_lost_after": o.quiet_lost_after, "pause_after": o.pause_after,
-            "quiet_db": o.quiet_db, "meas_noise": o.meas_noise, "rate_noise": o.rate_noise,
-            "onset_weight": o.onset_weight}
+    """Every option by name, in its table unit; mode by name; tick_period [s]."""
+    cdef char *base = <char *>o
+    out = {"tick_period": o.tick_period}
+    for name, info in OPTIONS.items():
+        if info["kind"] == "int":
+            out[name] = (<int *>(base + <size_t>info["offset"]))[0]
+        else:
+            out[name] = (<double *>(base + <size_t>info["offset"]))[0]
+    out["mode"] = {v: k for k, v in MODES.items()}.get(out["mode"], out["mode"])
+    return out
 
 
 def default_options():
-    """The C defaults (mar_follow_default_options), as a dict; window
-    lengths and times in ticks."""
+    """The C defaults (mar_follow_default_options), as a dict in the
+    table's units (times in s)."""
     cdef mar_follow_options o
     mar_follow_default_options(&o)
     return _options_dict(&o)
 
 
 cdef int _set_options(mar_follow_options *o, dict options) except -1:
+    """Options by name into o; KeyError for an unknown name, ValueError for
+    a value of the wrong kind (C checks the ranges)."""
+    cdef char *base = <char *>o
     for key, value in options.items():
-        kind = OPTION_KINDS.get(key)
-        if kind is None:
+        if key == "tick_period":
+            o.tick_period = float(value)
+            continue
+        info = OPTIONS.get(key)
+        if info is None:
             raise KeyError(key)
-        if kind == "mode":
-            o.mode = MODES[value]
-        elif kind == "i":
-            if isinstance(value, bool) or int(value) != value or value < 0:
+        if key == "mode":
+            if value not in MODES:
                 raise ValueError(key)
-            v = int(value)
-            if key == "window": o.window = v
-            elif key == "min_window": o.min_window = v
-            elif key == "verify_window": o.verify_window = v
-            elif key == "lock_window": o.lock_window = v
-            elif key == "paper_window": o.paper_window = v
-            elif key == "coarse": o.coarse = v
-            elif key == "search_window": o.search_window = v
-            elif key == "search_budget": o.search_budget = v
+            value = MODES[value]
+        if info["kind"] == "int":
+            if isinstance(value, bool) or int(value) != value or not (-2**31 <= value < 2**31):
+                raise ValueError(key)
+            (<int *>(base + <size_t>info["offset"]))[0] = int(value)
         else:
-            x = float(value)
-            if key == "rate_min": o.rate_min = x
-            elif key == "rate_max": o.rate_max = x
-            elif key == "delay": o.delay = x
-            elif key == "range_db": o.range_db = x
-            elif key == "rate_step": o.rate_step = x
-            elif key == "track_threshold": o.track_threshold = x
-            elif key == "lock_threshold": o.lock_threshold = x
-            elif key == "lock_margin": o.lock_margin = x
-            elif key == "hold_after": o.hold_after = x
-            elif key == "search_after": o.search_after = x
-            elif key == "lost_after": o.lost_after = x
-            elif key == "quiet_lost_after": o.quiet_lost_after = x
-            elif key == "pause_after": o.pause_after = x
-            elif key == "quiet_db": o.quiet_db = x
-            elif key == "meas_noise": o.meas_noise = x
-            elif key == "rate_noise": o.rate_noise = x
-            elif key == "onset_weight": o.onset_weight = x
+            (<double *>(base + <size_t>info["offset"]))[0] = float(value)
     return 0
 
 
@@ -294,6 +276,19 @@ cdef class Follower:
     def stored_length(self):
         """Stored frames [ticks]."""
         return mar_follow_stored_length(self.f)
+
+
+def options_problem(dict options=None):
+    """What the C follower refuses in options (mar_follow_check_options),
+    in words; None when it takes them. Raises KeyError, ValueError as the
+    Follower does for an unknown name or a value of the wrong kind."""
+    cdef mar_follow_options o
+    cdef const char *problem = NULL
+    mar_follow_default_options(&o)
+    _set_options(&o, options or {})
+    if mar_follow_check_options(&o, &problem) == 0:
+        return None
+    return problem.decode()
 
 
 def options_bytes(dict options=None):

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, make_dataclass
 from pathlib import Path
 
+from marionette import _follow
 from marionette.errors import ConfigError
 
 UNITS = ("m", "rad")
@@ -50,30 +51,32 @@ class AxisConfig:
         return self.dead_time + self.time_constant
 
 
-FOLLOW_MODES = ("smooth", "paper")
+FOLLOW_MODES = tuple(_follow.MODES)   # the C follower's modes
 ON_LOST = ("flywheel", "hold")      # what the show does while the music is not followed
 
 
-@dataclass(frozen=True)
-class FollowConfig:
-    """Music following (optional [follow] table): how the playback position
-    follows the live music. Times in s; marionette.follow turns them into
-    ticks for the C follower (ext/mar_follow.h, docs/music.md)."""
+def _follow_config_class():
+    """FollowConfig: one field per option of the C follower's table
+    (MAR_FOLLOW_OPTIONS in ext/mar_follow.h, which gives its default, range
+    and unit; docs/music.md lists them), and two of the show's own:
+    latency None (not set: the sound card's input latency, else the
+    table's default) and on_lost."""
+    defaults = _follow.default_options()
+    own = {"latency": (float | None, None), "on_lost": (str, "flywheel")}
+    specs = []
+    for name, info in _follow.OPTIONS.items():
+        kind = str if name == "mode" else int if info["kind"] == "int" else float
+        kind, default = own.get(name, (kind, defaults[name]))
+        specs.append((name, kind, field(default=default)))
+    specs.append(("on_lost", *own["on_lost"]))
+    cls = make_dataclass("FollowConfig", specs, frozen=True)
+    cls.__module__ = __name__
+    cls.__doc__ = ("Music following (the optional [follow] table): how the playback position "
+                   "follows the live music; times in s. Fields: " + ", ".join(f.name for f in fields(cls)))
+    return cls
 
-    mode: str = "smooth"            # "smooth" (fractional rate) or "paper" (double or skip a sample)
-    rate_min: float = 0.90          # slowest playback rate [1]
-    rate_max: float = 1.10          # fastest playback rate [1]
-    latency: float | None = None    # from the end of the newest loudness frame's audio to the tick [s];
-                                    # None: not set (0, or a sound card's own input latency)
-    window: float = 4.0             # tracking correlation window [s]
-    lock_threshold: float = 0.6     # correlation a place needs to lock [1]
-    lock_margin: float = 0.3        # its lead over any other place [Fisher z]
-    lost_after: float = 3.0         # unclear music before searching the whole piece [s]
-    pause_after: float = 0.16       # silence where music is expected before a pause [s]
-    search_budget: int = 512        # search candidates scored per tick [1]
-    range_db: float = 25.0          # loudness range below the running peak that counts [dB]
-    on_lost: str = "flywheel"       # while the music is not followed: play on at the last rate
-                                    # ("flywheel") or hold the place where it was lost ("hold")
+
+FollowConfig = _follow_config_class()
 
 
 @dataclass(frozen=True)
@@ -167,42 +170,31 @@ def _axis(src: str, index: int, table: dict) -> AxisConfig:
     )
 
 
-# [follow] keys: (lowest, highest) allowed, inclusive; None: no bound
-_FOLLOW_RANGES = {"rate_min": (0.25, 1.0), "rate_max": (1.0, 4.0), "latency": (0.0, 10.0),
-                  "window": (0.2, 60.0), "lock_threshold": (0.0, 0.99), "lock_margin": (0.0, 1.9),
-                  "lost_after": (0.0, None), "pause_after": (0.02, None), "range_db": (1.0, 200.0)}
-
-
-def _follow(src: str, table) -> FollowConfig:
-    """The optional [follow] table; defaults for what it leaves out."""
+def _follow_table(src: str, table) -> FollowConfig:
+    """The optional [follow] table, checked against the C follower's table
+    (kind and range of each option); defaults for what it leaves out."""
     if not isinstance(table, dict):
         raise ConfigError(f"{src}: [follow] must be a table")
     known = {f.name for f in fields(FollowConfig)}
-    for key in table:
-        if key not in known:
-            raise ConfigError(f"{src}: follow.{key} = {table[key]!r} is not a known key "
-                              f"(known: {', '.join(sorted(known))})")
     values = {}
-    if "mode" in table:
-        if table["mode"] not in FOLLOW_MODES:
-            raise ConfigError(f"{src}: follow.mode = {table['mode']!r} is not a known mode "
-                              f"(use one of {FOLLOW_MODES})")
-        values["mode"] = table["mode"]
-    if "on_lost" in table:
-        if table["on_lost"] not in ON_LOST:
-            raise ConfigError(f"{src}: follow.on_lost = {table['on_lost']!r} is not known "
-                              f"(use one of {ON_LOST})")
-        values["on_lost"] = table["on_lost"]
-    if "search_budget" in table:
-        values["search_budget"] = _integer(src, "follow.search_budget", table["search_budget"], 1, 100000)
-    for key, (lo, hi) in _FOLLOW_RANGES.items():
-        if key not in table:
-            continue
-        value = _number(src, f"follow.{key}", table[key])
-        if value < lo or (hi is not None and value > hi):
-            bound = f">= {lo!r}" if hi is None else f"in [{lo!r}, {hi!r}]"
-            raise ConfigError(f"{src}: follow.{key} = {table[key]!r} must be {bound}")
-        values[key] = value
+    for key, value in table.items():
+        info = _follow.OPTIONS.get(key)
+        if key not in known:
+            raise ConfigError(f"{src}: follow.{key} = {value!r} is not a known key "
+                              f"(known: {', '.join(sorted(known))})")
+        if key in ("mode", "on_lost"):
+            names = FOLLOW_MODES if key == "mode" else ON_LOST
+            if value not in names:
+                raise ConfigError(f"{src}: follow.{key} = {value!r} is not known (use one of {names})")
+            values[key] = value
+        elif info["kind"] == "int":
+            values[key] = _integer(src, f"follow.{key}", value, int(info["lo"]), int(info["hi"]))
+        else:
+            number = _number(src, f"follow.{key}", value)
+            if not info["lo"] <= number <= info["hi"]:
+                raise ConfigError(f"{src}: follow.{key} = {value!r} must be in [{info['lo']:g}, {info['hi']:g}]"
+                                  + (f" {info['unit']}" if info["unit"] else ""))
+            values[key] = number
     return FollowConfig(**values)
 
 
@@ -240,7 +232,7 @@ def config_from_dict(data: dict, source: str = "<memory>") -> FigureConfig:
                               f"node {a.node}, channel {a.channel}")
         addresses[key] = a.name
     return FigureConfig(name=str(figure.get("name", Path(source).stem)), tick_period=period,
-                        axes=axes, source=source, follow=_follow(source, data.get("follow", {})))
+                        axes=axes, source=source, follow=_follow_table(source, data.get("follow", {})))
 
 
 def load_config(path: str | Path | None = None) -> FigureConfig:

@@ -22,9 +22,9 @@ from marionette import _follow
 from marionette.config import FollowConfig
 from marionette.errors import MarionetteError
 
-STATES = _follow.STATES         # state code -> name: searching, locked, holding, paused
+STATES = _follow.STATES         # state code -> name: searching, locked, holding, paused, waiting
 FLAGS = _follow.FLAGS           # flag name -> bit
-MAX_RATES = 64                  # the C search's rate grid limit
+OPTIONS = _follow.OPTIONS       # option name -> kind, default, lo, hi, unit, why (ext/mar_follow.h)
 DEFAULT_START = 0.0             # where the live music starts by default [s of the show]: the top (a cue)
 
 
@@ -56,23 +56,32 @@ class Track:
 
 
 def c_options(settings: FollowConfig | None = None, period: float = 0.020, **overrides) -> dict:
-    """The C options (ticks, see default_options) for figure settings in SI
-    units at tick period [s]; overrides name C options directly."""
+    """The C follower's options (the names and units of its table,
+    OPTIONS) for figure settings at tick period [s]; overrides name
+    options directly. latency None (not set) is the table's default."""
     s = settings or FollowConfig()
     if not period > 0:
         raise FollowError(f"tick period {period!r} s must be > 0")
-    opt = _follow.default_options()
-    ticks = lambda seconds: seconds / period                      # noqa: E731 [s] -> [ticks]
-    latency = 0.0 if s.latency is None else s.latency          # [s]; None: not set
-    opt.update(mode=s.mode, rate_min=s.rate_min, rate_max=s.rate_max, delay=ticks(latency),
-               lock_threshold=s.lock_threshold, lock_margin=s.lock_margin,
-               lost_after=ticks(s.lost_after), pause_after=max(1.0, ticks(s.pause_after)),
-               search_budget=s.search_budget, range_db=s.range_db)
-    opt["window"] = max(opt["min_window"], int(round(ticks(s.window))))
-    # at most MAX_RATES search rates, whatever the rate range
-    opt["rate_step"] = max(opt["rate_step"], (s.rate_max - s.rate_min) / (MAX_RATES - 1) * 1.000001)
-    opt.update(overrides)
+    opt = {name: getattr(s, name) for name in OPTIONS}
+    if opt["latency"] is None:
+        opt["latency"] = OPTIONS["latency"]["default"]
+    opt.update(overrides, tick_period=period)
     return opt
+
+
+def options_markdown() -> str:
+    """The table of options in docs/music.md, made from the C table (the
+    docs keep a copy; tests/test_follow.py checks that it is this)."""
+    rows = ["| key | default | allowed | unit | what |", "|---|---|---|---|---|"]
+    for name, info in OPTIONS.items():
+        if name == "mode":
+            names = {code: f'"{mode}"' for mode, code in _follow.MODES.items()}
+            default, allowed = names[int(info["default"])], ", ".join(names.values())
+        else:
+            allowed = f"{info['lo']:g} .. {info['hi']:g}"
+            default = f"{info['default']:g}"
+        rows.append(f"| `{name}` | {default} | {allowed} | {info['unit']} | {info['why']} |")
+    return "\n".join(rows) + "\n"
 
 
 def cue_ticks(start: float | None, n_stored: int, period: float, what: str = "start") -> float:
@@ -87,11 +96,6 @@ def cue_ticks(start: float | None, n_stored: int, period: float, what: str = "st
     return start / period
 
 
-def default_options() -> dict:
-    """The C follower's own defaults (ticks, 1, dB)."""
-    return _follow.default_options()
-
-
 class Follower:
     """The C follower over stored (linear loudness, one value per tick, >= 0).
 
@@ -101,8 +105,8 @@ class Follower:
     colouring does not shift, wherever the live frames bring onsets too
     (NaN: a frame without; the loudness alone where a window has none).
     settings: a FollowConfig (the figure's [follow] table) or None for the
-    defaults; period: tick period [s]; options: C options by name, which
-    override the settings (see default_options()).
+    defaults; period: tick period [s]; options: options by name (OPTIONS,
+    in their units: times in s), which override the settings.
     """
 
     def __init__(self, stored, settings: FollowConfig | None = None, period: float = 0.020,
@@ -122,14 +126,10 @@ class Follower:
             if len(bad):
                 raise FollowError(f"stored onset[{bad[0]}] = {float(onset[bad[0]])!r} must be finite and >= 0")
         opt = c_options(settings, period, **options)
-        try:
-            self._f = _follow.Follower(stored, opt, onset)
-        except KeyError as exc:
-            raise FollowError(f"unknown follower option {exc.args[0]!r} "
-                              f"(known: {', '.join(sorted(_follow.OPTION_KINDS))})") from None
-        except ValueError as exc:
-            raise FollowError(f"the follower refused its options {opt} "
-                              f"(status {exc.args[0] if exc.args else '?'})") from None
+        problem = options_problem(opt)
+        if problem:
+            raise FollowError(f"follower options: {problem}")
+        self._f = _follow.Follower(stored, opt, onset)
         self.period = float(period)             # [s]
         self.options = dict(self._f.options)
 
@@ -196,7 +196,24 @@ def engine_options(config, show, mode: str | bool = True) -> bytes:
     if not np.any(stored > 0):
         raise FollowError(f"{show.path}: the stored loudness is silent throughout; nothing to follow")
     overrides = {} if mode is True else {"mode": mode}
+    opt = c_options(config.follow, config.tick_period, **overrides)
+    problem = options_problem(opt)
+    if problem:
+        raise FollowError(f"{config.source}: [follow]: {problem}")
+    return _follow.options_bytes(opt)
+
+
+def options_problem(opt: dict) -> str | None:
+    """What the C follower refuses in opt (c_options' dict), in words; None
+    when it takes them."""
     try:
-        return _follow.options_bytes(c_options(config.follow, config.tick_period, **overrides))
+        problem = _follow.options_problem(opt)
     except KeyError as exc:
-        raise FollowError(f"unknown follower option {exc.args[0]!r}") from None
+        return f"unknown option {exc.args[0]!r} (known: {', '.join(sorted(OPTIONS))})"
+    except ValueError as exc:
+        return f"{exc.args[0]} = {opt.get(exc.args[0])!r} is not a value of its kind"
+    name = (problem or "").split(" ")[0]
+    if name in OPTIONS and problem.endswith("outside its range"):
+        info = OPTIONS[name]
+        return f"{name} = {opt[name]!r} must be in [{info['lo']:g}, {info['hi']:g}] {info['unit']}".rstrip()
+    return problem

@@ -21,7 +21,7 @@ import numpy as np
 
 from marionette._core import FLAG_SOURCE_LOST, FLAG_UNFOLLOWED
 
-from marionette.follow import STATES
+from marionette.follow import OPTIONS, STATES
 
 SEARCHING, LOCKED, WAITING = (STATES.index(s) for s in ("searching", "locked", "waiting"))
 POLL_INTERVAL = 0.1             # how often the watcher reads the snapshot [s]
@@ -229,9 +229,9 @@ def never_locked_warning(source: str, s: FollowShare) -> str | None:
 def choose_latency(figure_latency: float | None, source_latency: float | None) -> tuple[float, str]:
     """The follower's input latency [s] and where it came from: the figure's
     [follow] latency when set, else the sound card's reported input latency,
-    else 0."""
+    else the follower's default."""
     if figure_latency is not None:
         return float(figure_latency), "the figure's [follow] latency"
     if source_latency is not None:
         return float(source_latency), "the sound card's input latency"
-    return 0.0, "default"
+    return OPTIONS["latency"]["default"], "default"

@@ -23,7 +23,8 @@ from marionette.bench.music import synthesize
 from marionette.bench.tape import Deck, play
 from marionette.config import FollowConfig, config_from_dict
 from marionette.errors import ConfigError
-from marionette.follow import FLAGS, STATES, FollowError, Follower, c_options, sync_ticks
+from marionette.follow import (FLAGS, OPTIONS, STATES, FollowError, Follower, c_options,
+                               options_markdown, sync_ticks)
 from marionette.loudness import loudness, onsets
 from conftest import figure_dict
 
@@ -637,10 +638,8 @@ def test_python_api_refuses_bad_arguments(stored):
         Follower([0.1, -0.5, 0.2])
     with pytest.raises(FollowError, match="at least 2"):
         Follower([0.1])
-    with pytest.raises(FollowError, match="unknown follower option 'speed'"):
+    with pytest.raises(FollowError, match="unknown option 'speed'"):
         Follower(stored, speed=2)
-    with pytest.raises(FollowError, match="refused its options"):
-        Follower(stored, window=1)
     with pytest.raises(FollowError, match="1-d"):
         Follower(stored).run(np.zeros((2, 2)))
     with pytest.raises(FollowError, match="stored onsets: shape"):
@@ -651,12 +650,38 @@ def test_python_api_refuses_bad_arguments(stored):
         Follower(stored, onset=np.zeros(len(stored))).run(np.zeros(5), np.zeros(4))
 
 
-def test_settings_in_seconds_become_ticks():
+def test_one_table_of_options_from_c_to_the_figure():
+    """The C table (ext/mar_follow.h) gives FollowConfig its fields and
+    defaults and the TOML its ranges; c_options hands the settings through
+    in seconds with the tick period, and C turns them into ticks."""
+    defaults = FollowConfig()
+    for name, info in OPTIONS.items():
+        assert hasattr(defaults, name), name
+        if name not in ("latency", "mode"):
+            assert getattr(defaults, name) == info["default"], name
+        assert info["lo"] <= info["default"] <= info["hi"], name
     opt = c_options(FollowConfig(window=3.0, latency=0.04, lost_after=2.0, rate_min=0.5, rate_max=3.0),
-                    period=0.02)
-    assert opt["window"] == 150 and opt["delay"] == pytest.approx(2.0)
-    assert opt["lost_after"] == pytest.approx(100.0)
-    assert (opt["rate_max"] - opt["rate_min"]) / opt["rate_step"] + 1 <= 64
+                    period=0.01)
+    assert (opt["window"], opt["latency"], opt["lost_after"], opt["tick_period"]) == (3.0, 0.04, 2.0, 0.01)
+    stored = np.abs(np.sin(np.arange(500) * 0.1)) + 0.1
+    Follower(stored, FollowConfig(rate_min=0.5, rate_max=3.0))       # a fine grid is widened, not refused
+    for period in (0.005, 0.010, 0.025, 0.040):
+        assert Follower(stored, period=period).options["tick_period"] == period
+    with pytest.raises(FollowError, match="min_window and paper_window must be at least 4 ticks"):
+        Follower(stored, period=0.2)                                 # the 0.5 s paper window: 2 ticks
+    with pytest.raises(FollowError, match="window and verify_window must lie between"):
+        Follower(stored, window=0.5)
+    with pytest.raises(FollowError, match=r"lock_threshold = 1.5 must be in \[0, 0.99\]"):
+        Follower(stored, lock_threshold=1.5)
+    with pytest.raises(FollowError, match="search_budget = 2.5 is not a value of its kind"):
+        Follower(stored, search_budget=2.5)
+
+
+def test_the_docs_table_of_options_is_the_c_table():
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "music.md").read_text()
+    start = doc.index("<!-- options table: generated, do not edit by hand -->\n")
+    end = doc.index("<!-- end of options table -->")
+    assert doc[start:end].split("\n", 1)[1] == options_markdown()
 
 
 def test_follow_table_in_the_figure_config():

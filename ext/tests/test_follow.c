@@ -46,26 +46,45 @@ static void test_bad_options(void)
     CHECK(f && status == 0, "defaults refused: %d", status);
     mar_follow_destroy(f);
 
-    struct { const char *what; mar_follow_options o; } bad[12];
+    struct { const char *what; mar_follow_options o; } bad[16];
     int nb = 0;
-    for (int i = 0; i < 12; i++)
+    for (int i = 0; i < 16; i++)
         mar_follow_default_options(&bad[i].o);
     bad[nb].what = "mode"; bad[nb++].o.mode = 7;
     bad[nb].what = "rate_min > 1"; bad[nb++].o.rate_min = 1.5;
     bad[nb].what = "rate_max < 1"; bad[nb++].o.rate_max = 0.5;
     bad[nb].what = "rate NaN"; bad[nb++].o.rate_min = NAN;
-    bad[nb].what = "window < min"; bad[nb++].o.window = 3;
-    bad[nb].what = "coarse 0"; bad[nb++].o.coarse = 0;
+    bad[nb].what = "window < min"; bad[nb++].o.window = 0.5;
+    bad[nb].what = "window 3 ticks"; bad[nb].o.min_window = 0.08; bad[nb++].o.window = 0.06;
+    bad[nb].what = "search block 0"; bad[nb++].o.search_block = 0.0;
+    bad[nb].what = "search window 5 blocks"; bad[nb++].o.search_window = 0.4;
     bad[nb].what = "budget 0"; bad[nb++].o.search_budget = 0;
     bad[nb].what = "threshold"; bad[nb++].o.lock_threshold = 1.5;
-    bad[nb].what = "pause_after"; bad[nb++].o.pause_after = 0.0;
-    bad[nb].what = "delay inf"; bad[nb++].o.delay = INFINITY;
-    bad[nb].what = "rate grid"; bad[nb++].o.rate_step = 1e-4;
-    bad[nb].what = "lock window"; bad[nb++].o.lock_window = 100000;
+    bad[nb].what = "pause_after < 0"; bad[nb++].o.pause_after = -0.1;
+    bad[nb].what = "latency inf"; bad[nb++].o.latency = INFINITY;
+    bad[nb].what = "rate step 0"; bad[nb++].o.rate_step = 0.0;
+    bad[nb].what = "lock window > verify"; bad[nb++].o.lock_window = 6.0;
+    bad[nb].what = "tick period 0"; bad[nb++].o.tick_period = 0.0;
+    bad[nb].what = "tick period NaN"; bad[nb++].o.tick_period = NAN;
     for (int i = 0; i < nb; i++) {
         status = 0;
         f = mar_follow_create(&bad[i].o, stored, 100, &status);
         CHECK(!f && status < 0, "bad option %s accepted", bad[i].what);
+        mar_follow_destroy(f);
+    }
+    /* a fine rate grid is widened to MAX_RATES rates, not refused; other
+     * tick periods convert the times */
+    mar_follow_options fine = o;
+    fine.rate_step = 0.002;      /* 101 rates over 0.9 .. 1.1 */
+    f = mar_follow_create(&fine, stored, 100, &status);
+    CHECK(f && status == 0, "fine rate grid refused: %d", status);
+    mar_follow_destroy(f);
+    const double periods[] = {0.005, 0.010, 0.025, 0.040};
+    for (size_t i = 0; i < sizeof periods / sizeof periods[0]; i++) {
+        mar_follow_options other = o;
+        other.tick_period = periods[i];
+        f = mar_follow_create(&other, stored, 100, &status);
+        CHECK(f && status == 0, "defaults at %g s ticks refused: %d", periods[i], status);
         mar_follow_destroy(f);
     }
     double with_nan[4] = {0.1, NAN, 0.2, 0.3}, negative[4] = {0.1, -0.1, 0.2, 0.3};
@@ -100,8 +119,8 @@ static void test_random_inputs(int cases)
         mar_follow_options o;
         mar_follow_default_options(&o);
         o.mode = c % 3 == 2 ? MAR_FOLLOW_PAPER : MAR_FOLLOW_SMOOTH;
-        o.search_budget = (size_t)uniform(1.0, 2000.0);
-        o.delay = uniform(0.0, 3.0);
+        o.search_budget = (int)uniform(1.0, 2000.0);
+        o.latency = uniform(0.0, 0.06);
         int status = 0;
         mar_follow *f = onsets ? mar_follow_create_onsets(&o, stored, stored_onset, N, &status)
                                : mar_follow_create(&o, stored, N, &status);
