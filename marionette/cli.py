@@ -21,11 +21,11 @@ from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
-from marionette.follow import sync_ticks
+from marionette.music.follower import sync_ticks
+from marionette.music.report import (LostWatcher, choose_latency, follow_share, lost_events,
+                                     never_locked_warning, recording_warnings, share_line,
+                                     verdict_line)
 from marionette.show import LIMIT_POLICIES, load_show
-from marionette.show_report import (LostWatcher, choose_latency, follow_share, lost_events,
-                                    never_locked_warning, recording_warnings, share_line,
-                                    verdict_line)
 
 BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync")
 # commands that live in their own modules (marionette/cmd_<name>.py, each with
@@ -53,7 +53,7 @@ def _live_frames(args, config):
     recording played back as if live), or None."""
     if not args.music:
         return None
-    from marionette.loudness import wav_frames
+    from marionette.music.feature import wav_frames
     return wav_frames(args.music, config.tick_period)
 
 
@@ -70,7 +70,7 @@ def _open_audio(args, engine_box: list):
     """The sound card source, started before the engine so that its input
     latency is known when the engine is made; frames go to the engine in
     engine_box once there is one (until then they are dropped)."""
-    from marionette.live_audio import LiveLoudness
+    from marionette.music.sound_card import LiveLoudness
     audio = None
 
     def to_engine(value: float, onset: float) -> None:

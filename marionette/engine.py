@@ -25,9 +25,9 @@ import numpy as np
 from marionette import _core
 from marionette.config import FigureConfig
 from marionette.errors import EngineError
+from marionette.music.follower import (DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
+                                       engine_options as follower_options)
 from marionette.recorder import FlightRecorder
-from marionette.follow import (DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
-                               engine_options as follower_options)
 from marionette.show import Show, fit_to_figure
 from marionette.transport.supervisor import LinkSupervisor
 

@@ -16,12 +16,12 @@ import pytest
 from audio_support import (SINK, play_into_sink, pulse_device, recording_env, start_server,
                            stop_server)
 from hil_support import dance_from_home
-from marionette.bench.music import synthesize
 from marionette.config import load_config
-from marionette.live_audio import LiveLoudness, _choose, input_devices
-from marionette.loudness import AudioError, wav_frames, write_wav
+from marionette.music.feature import AudioError, wav_frames, write_wav
+from marionette.music.sound_card import LiveLoudness, _choose, input_devices
 from marionette.recorder import read_flight_record
 from marionette.show import Show
+from marionette.sim.music import synthesize
 
 T = 0.020                       # tick period of the bundled figure [s]
 # measured here (2 cores, PulseAudio 16.1, PortAudio 19.6): the first frame

@@ -1,7 +1,7 @@
 """Music following from Python: the C follower (ext/mar_follow.c) over a
 stored loudness, fed live loudness frames one per tick.
 
-    from marionette.follow import Follower
+    from marionette.music.follower import Follower
     f = Follower(show.loudness, config.follow, period=config.tick_period)
     track = f.run(live_frames)          # arrays, one entry per tick
     out = f.step(frame)                 # one tick (NaN: no frame this tick)

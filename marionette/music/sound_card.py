@@ -1,12 +1,12 @@
 """Live loudness from a sound card: audio blocks in, one loudness frame per
 tick out, to a callback (e.g. ``Engine.push_loudness``).
 
-    from marionette.live_audio import LiveLoudness
+    from marionette.music.sound_card import LiveLoudness
     with LiveLoudness(engine.push_loudness, device="USB Audio") as source:
         engine.start()
         ...
 
-The frames are the same feature as the stored loudness (marionette.loudness:
+The frames are the same feature as the stored loudness (marionette.music.feature:
 band RMS of each 20 ms of audio, linear), so teach and show time agree;
 the follower is insensitive to the volume and the sample rate. Capture runs
 on the sound card's sample rate (its default, or the one asked for), mono
@@ -32,8 +32,8 @@ from typing import Callable
 
 import numpy as np
 
-from marionette.loudness import FRAME_PERIOD, AudioError, LoudnessMeter, OnsetMeter
-from marionette.stderr_catch import StderrCatcher
+from marionette.music.feature import FRAME_PERIOD, AudioError, LoudnessMeter, OnsetMeter
+from marionette.music.stderr_catch import StderrCatcher
 
 BLOCK_PERIOD = 0.010            # capture block [s]: half a frame, so frames leave on time
 LOST_SILENCE = 0.5              # no block for this long while running: the source is lost [s]
@@ -130,7 +130,7 @@ class LiveLoudness:
     audio came for LOST_SILENCE while it ran (FIRST_BLOCK_WAIT before the
     first block). ``lost_reason`` keeps the reason (None while all is well).
     With catch_stderr, what PortAudio and ALSA print on stderr while the
-    stream is open is kept off the terminal (marionette.stderr_catch) and
+    stream is open is kept off the terminal (marionette.music.stderr_catch) and
     folded into the reason; ``messages`` has the lines.
 
     Reported: ``frames`` delivered, ``overflows`` (blocks PortAudio flagged
