@@ -238,7 +238,7 @@ def test_live_source_gives_the_same_frames_as_the_file_path():
     x = music(22050, 2.0, 4)
     sd = fake_sounddevice([SPEAKER, MIC], signal=x)
     got = []
-    with sound_card.LiveLoudness(got.append, device="usb", channels=2, sd=sd) as src:
+    with sound_card.SoundCard(got.append, device="usb", channels=2, sd=sd) as src:
         assert src.device["index"] == 1 and src.sample_rate == 22050.0
         assert sd.streams[0].blocksize == round(22050 * sound_card.BLOCK_PERIOD)
     assert sd.streams[0].closed
@@ -250,25 +250,25 @@ def test_live_source_gives_the_same_frames_as_the_file_path():
 def test_no_sounddevice_package_is_a_clear_error(monkeypatch):
     monkeypatch.setitem(sys.modules, "sounddevice", None)            # import fails
     with pytest.raises(AudioError, match=r"pip install 'marionette\[audio\]'"):
-        sound_card.LiveLoudness(print)
+        sound_card.SoundCard(print)
 
 
 def test_no_input_device_is_a_clear_error():
     with pytest.raises(AudioError, match="no audio input device found"):
-        sound_card.LiveLoudness(print, sd=fake_sounddevice([SPEAKER]))
+        sound_card.SoundCard(print, sd=fake_sounddevice([SPEAKER]))
     with pytest.raises(AudioError, match="cannot list audio devices"):
-        sound_card.LiveLoudness(print, sd=fake_sounddevice(OSError("no PortAudio host")))
+        sound_card.SoundCard(print, sd=fake_sounddevice(OSError("no PortAudio host")))
     with pytest.raises(AudioError, match="no audio input device 'studio'.*1: USB Microphone"):
-        sound_card.LiveLoudness(print, device="studio", sd=fake_sounddevice([SPEAKER, MIC]))
+        sound_card.SoundCard(print, device="studio", sd=fake_sounddevice([SPEAKER, MIC]))
     with pytest.raises(AudioError, match="no audio input device 7"):
-        sound_card.LiveLoudness(print, device=7, sd=fake_sounddevice([SPEAKER, MIC]))
+        sound_card.SoundCard(print, device=7, sd=fake_sounddevice([SPEAKER, MIC]))
 
 
 def test_unusable_settings_are_clear_errors():
     sd = fake_sounddevice([MIC], refuse="Invalid sample rate")
     with pytest.raises(AudioError, match="cannot record 1 channel.*Invalid sample rate"):
-        sound_card.LiveLoudness(print, sample_rate=12345, sd=sd)
+        sound_card.SoundCard(print, sample_rate=12345, sd=sd)
     with pytest.raises(AudioError, match="has 2 channel"):
-        sound_card.LiveLoudness(print, channels=3, sd=fake_sounddevice([MIC]))
+        sound_card.SoundCard(print, channels=3, sd=fake_sounddevice([MIC]))
     with pytest.raises(AudioError, match="below"):
-        sound_card.LiveLoudness(print, sample_rate=4000, sd=fake_sounddevice([MIC]))
+        sound_card.SoundCard(print, sample_rate=4000, sd=fake_sounddevice([MIC]))
