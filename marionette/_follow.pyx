@@ -3,7 +3,7 @@
 
 Validates arguments, then calls C; a whole array of live frames runs
 through the C step inside ``with nogil``. Returns C status codes and numpy
-arrays; marionette.follow raises. Units: positions [stored ticks], rates
+arrays; marionette.music.follower raises. Units: positions [stored ticks], rates
 [stored ticks per tick], loudness linear [full scale], times [ns].
 """
 import numpy as np

@@ -10,8 +10,6 @@ import argparse
 import importlib
 import os
 import sys
-import threading
-import time
 from dataclasses import replace
 
 import numpy as np
@@ -21,11 +19,10 @@ from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
-from marionette.follow import sync_ticks
+from marionette.music.report import (LostWatcher, choose_latency, follow_share, lost_events,
+                                     never_locked_warning, recording_warnings, share_line,
+                                     verdict_line)
 from marionette.show import LIMIT_POLICIES, load_show
-from marionette.show_report import (LostWatcher, choose_latency, follow_share, lost_events,
-                                    never_locked_warning, recording_warnings, share_line,
-                                    verdict_line)
 
 BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync")
 # commands that live in their own modules (marionette/cmd_<name>.py, each with
@@ -48,29 +45,20 @@ def cmd_check(args) -> int:
     return 0
 
 
-def _live_frames(args, config):
-    """The live music's (loudness, onset strength) frames from --music (a
-    recording played back as if live), or None."""
+def _recording_source(args, config):
+    """The live music from --music (a recording played back as if live), or
+    None; its sink is the engine, set once there is one."""
     if not args.music:
         return None
-    from marionette.loudness import wav_frames
-    return wav_frames(args.music, config.tick_period)
-
-
-def _feed_in_real_time(engine, frames, period: float, stop: threading.Event) -> None:
-    """Push one frame per period [s], as a sound card would."""
-    start = time.monotonic()
-    for k, (value, onset) in enumerate(zip(*frames)):
-        if stop.wait(max(0.0, start + (k + 1) * period - time.monotonic())):
-            return
-        engine.push_loudness(float(value), float(onset))
+    from marionette.music.wav_source import WavSource
+    return WavSource(args.music, period=config.tick_period)
 
 
 def _open_audio(args, engine_box: list):
     """The sound card source, started before the engine so that its input
     latency is known when the engine is made; frames go to the engine in
     engine_box once there is one (until then they are dropped)."""
-    from marionette.live_audio import LiveLoudness
+    from marionette.music.sound_card import SoundCard
     audio = None
 
     def to_engine(value: float, onset: float) -> None:
@@ -83,7 +71,7 @@ def _open_audio(args, engine_box: list):
             engine_box[0].source_lost(reason)
 
     # the index comes as a string: the source takes digits as an index
-    audio = LiveLoudness(to_engine, device=args.audio_device or None, onsets=True, on_lost=audio_lost)
+    audio = SoundCard(to_engine, device=args.audio_device or None, onsets=True, on_lost=audio_lost)
     return audio.start()
 
 
@@ -93,18 +81,18 @@ def cmd_play(args) -> int:
     output = None
     if args.output and args.link:
         raise MarionetteError("give --output or --link, not both")
-    live = _live_frames(args, config)
+    live = _recording_source(args, config)
     n = args.ticks if args.ticks is not None else show.n_ticks
     follow = args.follow or (True if (live is not None or args.audio_device is not None) else None)
     if live is not None:        # said before the show, which goes on regardless
-        for line in recording_warnings(args.music, live[0], period, show.duration, args.start):
+        for line in recording_warnings(args.music, live.loudness, period, show.duration, args.start):
             print(line, file=sys.stderr, flush=True)
     if args.output:
         output = os.open(args.output, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
     elif args.link:
         from marionette.transport import open_link
         output = open_link(args.link)
-    audio, stop_feed, watcher, engine_box = None, threading.Event(), None, []
+    audio, watcher, engine_box = None, None, []
     on_lost = config.follow.on_lost
     try:
         if args.audio_device is not None:
@@ -116,23 +104,22 @@ def cmd_play(args) -> int:
                     output=output, record=args.record or True, rate=args.rate,
                     follow=follow, follow_start=args.start) as engine:
             engine_box.append(engine)
+            if live is not None:
+                live.sink = engine.push_loudness
             if args.realtime:
                 engine.start(priority=args.priority, cpu=args.cpu, lock_memory=args.lock_memory,
                              max_ticks=n)
                 if follow:
                     watcher = LostWatcher(engine, period, on_lost).start()
                 if live is not None:
-                    threading.Thread(target=_feed_in_real_time, daemon=True,
-                                     args=(engine, live, period, stop_feed)).start()
+                    live.start()
                 engine.wait()
                 engine.stop()
                 if watcher is not None:
                     watcher.stop()
             elif live is not None:       # tick k has heard frame k - 1, as in sync-sim
-                loud, onset = (sync_ticks(x) for x in live)
                 for k in range(n):
-                    if k < len(loud) and not np.isnan(loud[k]):
-                        engine.push_loudness(loud[k], onset[k])
+                    live.feed_tick(k)
                     engine.step(1)
             else:
                 engine.step(n)
@@ -140,7 +127,8 @@ def cmd_play(args) -> int:
             records = engine.records()
             nodes = engine.nodes.summary() if engine.nodes is not None else None
     finally:
-        stop_feed.set()
+        if live is not None:
+            live.stop()
         if watcher is not None:
             watcher.stop()
         if audio is not None:

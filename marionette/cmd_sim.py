@@ -57,7 +57,7 @@ def cmd_sim(args) -> int:
                     position_noise=args.noise, silent=set(args.silent), seed=args.seed)
     music = None
     if args.music:
-        from marionette.loudness import read_wav
+        from marionette.music.feature import read_wav
         music = read_wav(args.music)
     node = args.loudness_node if args.loudness_node is not None else max(a.node for a in config.axes)
     figure = SimFigure(config, faults, args.watchdog_ticks or DEFAULT_WATCHDOG_TICKS,

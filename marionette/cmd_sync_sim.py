@@ -6,7 +6,7 @@
 
 The taught recording (or a show file, whose stored loudness and onsets the
 engine follows) gives the stored loudness and onset strength (one frame
-each per tick, marionette/loudness.py), the live recording the live
+each per tick, marionette/music/feature.py), the live recording the live
 frames (--loudness-only: the live loudness alone, as servo nodes measure
 it; the tracker then works without onsets, as the engine does on node
 LOUDNESS frames); the C follower runs its tick (mar_follow_tick, the same
@@ -34,8 +34,8 @@ import numpy as np
 
 from marionette.config import FOLLOW_MODES, load_config
 from marionette.errors import MarionetteError
-from marionette.follow import DEFAULT_START, STATES, Follower, cue_ticks, sync_ticks
-from marionette.loudness import wav_frames, wav_loudness
+from marionette.music.feature import wav_frames, wav_loudness
+from marionette.music.follower import DEFAULT_START, STATES, Follower, cue_ticks, sync_ticks
 from marionette.show import load_show
 
 

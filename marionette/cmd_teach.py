@@ -19,7 +19,7 @@ import numpy as np
 
 from marionette.config import load_config
 from marionette.errors import TeachError
-from marionette.loudness import wav_frames
+from marionette.music.feature import wav_frames
 from marionette.progress import Progress
 from marionette.shape import POLICIES, shape_show
 from marionette.show import LIMIT_POLICIES, Show, fit_to_figure

@@ -25,9 +25,10 @@ import numpy as np
 from marionette import _core
 from marionette.config import FigureConfig
 from marionette.errors import EngineError
+from marionette.music.follower import (DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
+                                       engine_options as follower_options)
+from marionette.music.node_source import NodeLoudness
 from marionette.recorder import FlightRecorder
-from marionette.follow import (DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
-                               engine_options as follower_options)
 from marionette.show import Show, fit_to_figure
 from marionette.transport.supervisor import LinkSupervisor
 
@@ -153,11 +154,13 @@ class Engine:
             if self.protocol != "serial":
                 raise ValueError("poll='one' is for a serial line; a CAN SYNC polls every node")
             _raise_for(self._core.set_poll(True), "poll")
+        # the servo nodes' LOUDNESS as a live source, when the music is followed
+        self.node_loudness = NodeLoudness(self.push_loudness).start() if follow else None
         self.supervisor = None      # the servo nodes' receive path, for a link (marionette.transport)
         if hasattr(output, "start_receiving"):
             self.supervisor = LinkSupervisor(
                 output, config, self._latest_tick, self._core.set_node_alarms, poll == "one",
-                on_loudness=self._push_node_loudness if follow else None,
+                on_loudness=None if self.node_loudness is None else self.node_loudness.take,
                 log_path=None if record in (None, False, True) else f"{record}.nodes.csv")
         self.set_rate(rate)
         self._drain_thread: threading.Thread | None = None
@@ -277,6 +280,8 @@ class Engine:
 
     def close(self) -> None:
         self.stop()
+        if self.node_loudness is not None:
+            self.node_loudness.stop()
         if self.supervisor is not None:
             self.supervisor.close()
         if self.recorder is not None:
@@ -322,12 +327,6 @@ class Engine:
     def _latest_tick(self) -> int | None:
         rec = self._core.snapshot()
         return None if rec is None else int(rec["tick"])
-
-    def _push_node_loudness(self, value: float) -> None:
-        try:
-            self.push_loudness(value)
-        except (ValueError, EngineError):
-            pass            # counted by the C engine as bad input or a full ring
 
     @property
     def nodes(self):

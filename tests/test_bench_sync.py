@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from marionette.bench import sync
-from marionette.bench.tape import Played
-from marionette.follow import STATES, Track
+from marionette.music.follower import STATES, Track
+from marionette.sim.tape import Played
 
 KEYS = {"mode", "within20", "within50", "within200", "median_ms", "p95_ms", "lock_s_max",
         "relock_after_pause_s_max", "false_locks", "us_per_tick_median", "us_per_tick_p99"}
@@ -147,7 +147,7 @@ def test_false_locks_and_resume_times():
 
 
 def test_overlapping_pauses_restart_the_tape_once():
-    from marionette.bench.tape import Deck, play
+    from marionette.sim.tape import Deck, play
     x = np.sin(np.arange(16000 * 12) * 0.05) * 0.1
     played = play(x, 16000, Deck(pauses=((1.0, 2.0), (2.5, 3.0)), seconds=8.0))
     assert played.resumes == [pytest.approx(5.5)]             # not at 3.0: the second pause holds it

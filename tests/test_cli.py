@@ -38,11 +38,11 @@ def test_play_follows_music_with_onsets(tmp_path):
     """`play SHOW --music LIVE.wav`: the show stores loudness and onsets, the
     recording is played back as if live (loudness and onset per tick), and
     the engine's playback position follows the tape."""
-    from marionette.bench.music import synthesize
-    from marionette.bench.tape import Deck, play
     from marionette.config import load_config
     from marionette.demo import make_demo_show
-    from marionette.loudness import loudness, onsets, write_wav
+    from marionette.music.feature import loudness, onsets, write_wav
+    from marionette.sim.music import synthesize
+    from marionette.sim.tape import Deck, play
 
     piece = synthesize("pop", seed=1)
     taught = piece.samples[:int(40 * piece.sample_rate)]

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 
 from conftest import make_figure, run_cli
-from marionette.bench.music import STYLES, synthesize
-from marionette.bench.tape import Deck, play
 from marionette.engine import Engine
-from marionette.follow import STATES, Follower, sync_ticks
-from marionette.loudness import loudness, onsets, write_wav
+from marionette.music.feature import loudness, onsets, write_wav
+from marionette.music.follower import STATES, Follower, sync_ticks
 from marionette.show import Show
+from marionette.sim.music import STYLES, synthesize
+from marionette.sim.tape import Deck, play
 
 T = 0.020
 LOCKED, WAITING = STATES.index("locked"), STATES.index("waiting")

@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 from conftest import make_figure
-from marionette.bench.music import synthesize
-from marionette.bench.tape import Deck, play
 from marionette._core import FLAG_MOVING
 from marionette.engine import Engine
-from marionette.follow import Follower, FollowError, sync_ticks
-from marionette.loudness import loudness, onsets
+from marionette.music.feature import loudness, onsets
+from marionette.music.follower import Follower, FollowError, sync_ticks
 from marionette.show import Show
+from marionette.sim.music import synthesize
+from marionette.sim.tape import Deck, play
 
 T = 0.020
 

@@ -1,11 +1,11 @@
-"""The music follower (ext/mar_follow.c through marionette.follow): it locks
+"""The music follower (ext/mar_follow.c through marionette.music.follower): it locks
 and follows a fast tape, holds through a pause, finds an unknown start,
 stays put on silence and noise, and refuses bad input without noticing it.
 The C code also runs standalone under AddressSanitizer and UBSan, with
 allocation counting around the steps.
 
-Live audio is synthesized music (marionette.bench.music) played through the
-simulated tape deck (marionette.bench.tape), whose time warp is the truth.
+Live audio is synthesized music (marionette.sim.music) played through the
+simulated tape deck (marionette.sim.tape), whose time warp is the truth.
 Positions are compared in seconds of taught music; no timing assertions.
 """
 from __future__ import annotations
@@ -19,13 +19,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from marionette.bench.music import synthesize
-from marionette.bench.tape import Deck, play
 from marionette.config import FollowConfig, config_from_dict
 from marionette.errors import ConfigError
-from marionette.follow import (FLAGS, OPTIONS, STATES, FollowError, Follower, c_options,
-                               options_markdown, sync_ticks)
-from marionette.loudness import loudness, onsets
+from marionette.music.feature import loudness, onsets
+from marionette.music.follower import (FLAGS, OPTIONS, STATES, FollowError, Follower, c_options,
+                                       options_markdown, sync_ticks)
+from marionette.sim.music import synthesize
+from marionette.sim.tape import Deck, play
 from conftest import figure_dict
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,5 +1,5 @@
-"""The loudness feature (marionette.loudness) and the live sound-card source
-(marionette.live_audio).
+"""The loudness feature (marionette.music.feature) and the live sound-card source
+(marionette.music.sound_card).
 
 The feature is the same at teach and show time: linear in the volume, the
 same at any sample rate from 8 kHz up, framed on the 20 ms tick grid. The
@@ -17,10 +17,10 @@ import types
 import numpy as np
 import pytest
 
-from marionette import live_audio
-from marionette.follow import Follower, sync_ticks
-from marionette.loudness import (BAND, FRAME_PERIOD, AudioError, LoudnessMeter, OnsetMeter, loudness,
-                                 onsets, read_wav, wav_frames, wav_loudness, write_wav)
+from marionette.music import sound_card
+from marionette.music.feature import (BAND, FRAME_PERIOD, AudioError, LoudnessMeter, OnsetMeter,
+                                      loudness, onsets, read_wav, wav_frames, wav_loudness, write_wav)
+from marionette.music.follower import Follower, sync_ticks
 
 T = FRAME_PERIOD
 
@@ -238,9 +238,9 @@ def test_live_source_gives_the_same_frames_as_the_file_path():
     x = music(22050, 2.0, 4)
     sd = fake_sounddevice([SPEAKER, MIC], signal=x)
     got = []
-    with live_audio.LiveLoudness(got.append, device="usb", channels=2, sd=sd) as src:
+    with sound_card.SoundCard(got.append, device="usb", channels=2, sd=sd) as src:
         assert src.device["index"] == 1 and src.sample_rate == 22050.0
-        assert sd.streams[0].blocksize == round(22050 * live_audio.BLOCK_PERIOD)
+        assert sd.streams[0].blocksize == round(22050 * sound_card.BLOCK_PERIOD)
     assert sd.streams[0].closed
     expected = loudness(x[:len(x) // sd.streams[0].blocksize * sd.streams[0].blocksize], 22050)
     assert np.allclose(got, expected, rtol=1e-5, atol=1e-7)         # float32 blocks
@@ -250,25 +250,25 @@ def test_live_source_gives_the_same_frames_as_the_file_path():
 def test_no_sounddevice_package_is_a_clear_error(monkeypatch):
     monkeypatch.setitem(sys.modules, "sounddevice", None)            # import fails
     with pytest.raises(AudioError, match=r"pip install 'marionette\[audio\]'"):
-        live_audio.LiveLoudness(print)
+        sound_card.SoundCard(print)
 
 
 def test_no_input_device_is_a_clear_error():
     with pytest.raises(AudioError, match="no audio input device found"):
-        live_audio.LiveLoudness(print, sd=fake_sounddevice([SPEAKER]))
+        sound_card.SoundCard(print, sd=fake_sounddevice([SPEAKER]))
     with pytest.raises(AudioError, match="cannot list audio devices"):
-        live_audio.LiveLoudness(print, sd=fake_sounddevice(OSError("no PortAudio host")))
+        sound_card.SoundCard(print, sd=fake_sounddevice(OSError("no PortAudio host")))
     with pytest.raises(AudioError, match="no audio input device 'studio'.*1: USB Microphone"):
-        live_audio.LiveLoudness(print, device="studio", sd=fake_sounddevice([SPEAKER, MIC]))
+        sound_card.SoundCard(print, device="studio", sd=fake_sounddevice([SPEAKER, MIC]))
     with pytest.raises(AudioError, match="no audio input device 7"):
-        live_audio.LiveLoudness(print, device=7, sd=fake_sounddevice([SPEAKER, MIC]))
+        sound_card.SoundCard(print, device=7, sd=fake_sounddevice([SPEAKER, MIC]))
 
 
 def test_unusable_settings_are_clear_errors():
     sd = fake_sounddevice([MIC], refuse="Invalid sample rate")
     with pytest.raises(AudioError, match="cannot record 1 channel.*Invalid sample rate"):
-        live_audio.LiveLoudness(print, sample_rate=12345, sd=sd)
+        sound_card.SoundCard(print, sample_rate=12345, sd=sd)
     with pytest.raises(AudioError, match="has 2 channel"):
-        live_audio.LiveLoudness(print, channels=3, sd=fake_sounddevice([MIC]))
+        sound_card.SoundCard(print, channels=3, sd=fake_sounddevice([MIC]))
     with pytest.raises(AudioError, match="below"):
-        live_audio.LiveLoudness(print, sample_rate=4000, sd=fake_sounddevice([MIC]))
+        sound_card.SoundCard(print, sample_rate=4000, sd=fake_sounddevice([MIC]))

@@ -11,13 +11,13 @@ import pytest
 
 from conftest import figure_dict, make_figure
 from marionette._core import FLAG_MOVING, FLAG_UNFOLLOWED
-from marionette.bench.music import synthesize
-from marionette.bench.tape import Deck, play
 from marionette.config import ConfigError, config_from_dict
 from marionette.engine import Engine
-from marionette.follow import sync_ticks
-from marionette.loudness import loudness
+from marionette.music.feature import loudness
+from marionette.music.follower import sync_ticks
 from marionette.show import Show
+from marionette.sim.music import synthesize
+from marionette.sim.tape import Deck, play
 
 T = 0.020           # [s]
 SEARCHING = 0       # follow_state code

@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 from conftest import run_cli
-from marionette.bench.music import synthesize
-from marionette.bench.tape import Deck, play
 from marionette.cmd_sync_sim import simulate
 from marionette.config import load_config
-from marionette.loudness import read_wav, wav_frames, write_wav
+from marionette.music.feature import read_wav, wav_frames, write_wav
 from marionette.recorder import read_flight_record
 from marionette.show import Show
+from marionette.sim.music import synthesize
+from marionette.sim.tape import Deck, play
 from marionette.teach.make_sample import sample_path
 
 T = 0.020

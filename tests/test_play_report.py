@@ -8,18 +8,18 @@ import numpy as np
 import pytest
 
 from conftest import figure_dict, make_figure, run_cli as run
-from marionette.bench.music import synthesize
-from marionette.bench.tape import Deck, play
+from marionette._core import FLAG_UNFOLLOWED
 from marionette.config import config_from_dict, default_config_path, load_config
 from marionette.demo import make_demo_show
 from marionette.engine import Engine
-from marionette.follow import c_options, sync_ticks
-from marionette.loudness import loudness, onsets, write_wav
+from marionette.music.feature import loudness, onsets, write_wav
+from marionette.music.follower import c_options, sync_ticks
+from marionette.music.report import (LostWatcher, choose_latency, follow_share, lost_events,
+                                     recording_warnings)
 from marionette.recorder import read_flight_record
 from marionette.show import Show
-from marionette._core import FLAG_UNFOLLOWED
-from marionette.show_report import (LostWatcher, choose_latency, follow_share, lost_events,
-                                    recording_warnings)
+from marionette.sim.music import synthesize
+from marionette.sim.tape import Deck, play
 
 FS = 22050          # live sample rate [Hz]
 T = 0.020           # [s]
@@ -219,7 +219,7 @@ def test_the_share_counts_searching_once_music_is_heard():
     """Ticks before the first live frame (a sound card opening) are not
     unfollowed; searching after it is, and more than half of the show makes
     the verdict."""
-    from marionette.show_report import verdict_line
+    from marionette.music.report import verdict_line
     rec = np.zeros(1000, dtype=[("follow_state", "<i4"), ("flags", "<u4"), ("live_loudness", "<f8")])
     rec["live_loudness"][:300] = np.nan          # no frame for 6 s
     rec["follow_state"][:700] = 0                # searching until tick 700, then locked

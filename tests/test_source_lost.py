@@ -11,13 +11,13 @@ import pytest
 from conftest import run_cli
 from marionette import _core
 from marionette._core import FLAG_SOURCE_LOST, FLAG_UNFOLLOWED
-from marionette.bench.tape import Deck, play
 from marionette.config import load_config
 from marionette.engine import Engine
-from marionette.follow import sync_ticks
-from marionette.loudness import loudness, onsets, read_wav
+from marionette.music.feature import loudness, onsets, read_wav
+from marionette.music.follower import sync_ticks
+from marionette.music.report import follow_share, share_line
 from marionette.show import load_show
-from marionette.show_report import follow_share, share_line
+from marionette.sim.tape import Deck, play
 from marionette.teach.make_sample import sample_path
 
 LOST_AT = 1200          # the tick the source is reported lost before [tick] (24 s; locked by then)

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from marionette import cli
-from marionette.bench.music import synthesize
-from marionette.bench.tape import Deck, play
-from marionette.follow import STATES
-from marionette.loudness import write_wav
+from marionette.music.feature import write_wav
+from marionette.music.follower import STATES
+from marionette.sim.music import synthesize
+from marionette.sim.tape import Deck, play
 from conftest import run_cli
 
 T = 0.020

@@ -1,15 +1,15 @@
 """``marionette bench sync``: music following against ground truth, both modes.
 
-Test music is synthesized (marionette.bench.music: pop, waltz, ambient and
+Test music is synthesized (marionette.sim.music: pop, waltz, ambient and
 techno pieces, 1.5 to 3.5 minutes, with rhythm, dynamics, quiet passages
 and repeated sections) and played through a simulated tape deck
-(marionette.bench.tape): speed 0.94 to 1.06 with pitch moving with it, slow
+(marionette.sim.tape): speed 0.94 to 1.06 with pitch moving with it, slow
 drift, wow 0.1-0.5 % at 0.5-1 Hz, flutter at 4-10 Hz, gain ramps of up to
 +-20 dB, noise at 30/20/10 dB SNR, a reverberant room, pauses of 1 to 10 s,
 a start at an unknown point and a jump, at live sample rates 11.025 to
 22.05 kHz (the taught music is at 16 kHz). Ground truth comes from the
 deck's time warp. For every scenario the same loudness and onset frames
-(marionette.loudness) run through the C follower in both modes, tick by
+(marionette.music.feature) run through the C follower in both modes, tick by
 tick as in the engine (tick k gets
 live frame k - 1); the follower starts knowing nothing (searching). Five
 runs per piece and seed; by default four seeds (80 runs), so that tuning
@@ -88,10 +88,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from marionette.bench._machine import describe, machine_info
-from marionette.bench.music import synthesize
-from marionette.bench.tape import Deck, play
-from marionette.follow import STATES, Follower, sync_ticks
-from marionette.loudness import FRAME_PERIOD, loudness, onsets
+from marionette.music.feature import FRAME_PERIOD, loudness, onsets
+from marionette.music.follower import STATES, Follower, sync_ticks
+from marionette.sim.music import synthesize
+from marionette.sim.tape import Deck, play
 
 T = FRAME_PERIOD                # tick period [s]
 SEED = 20261122

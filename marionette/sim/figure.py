@@ -13,7 +13,7 @@ import numpy as np
 
 from marionette import protocol
 from marionette.config import FigureConfig
-from marionette.loudness import LoudnessMeter, mono
+from marionette.music.feature import LoudnessMeter, mono
 from marionette.sim.faults import Faults
 from marionette.sim.node import DEFAULT_WATCHDOG_TICKS, SimNode
 

@@ -10,7 +10,7 @@ writes, deterministically (fixed seed, numpy's PCG64):
 * ``recording.csv`` - LED detections of a known dance, as long as the music (45 s)
   (:mod:`marionette.teach.synthetic`: 0.5 px noise, integer pixels, dropouts, shading);
 * ``music.wav``     - 45 s of a song from the project's synthesizer
-  (:mod:`marionette.bench.music`, pop style: drums, bass, chords, a melody), 8 kHz mono
+  (:mod:`marionette.sim.music`, pop style: drums, bass, chords, a melody), 8 kHz mono
   16-bit: 120 beats per minute, intro, verse, chorus, break, verse, chorus, outro. The
   verse and the chorus come back once (the same notes with a repeat's small
   differences); nothing else repeats: the loudness level correlates at most 0.40
@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from marionette.bench.music import Piece, synthesize
-from marionette.loudness import write_wav
+from marionette.music.feature import write_wav
+from marionette.sim.music import Piece, synthesize
 from marionette.teach.camera import CameraParams, camera_coordinates, project
 from marionette.teach.markers import CameraMarkers, write_markers
 from marionette.teach.recording import write_recording

@@ -65,8 +65,8 @@ def pulse_device() -> dict:
     # first the server: PortAudio lists the ALSA devices it could open when
     # it starts (at the import of sounddevice), 'pulse' only with a server
     start_server()
-    from marionette.live_audio import input_devices
-    from marionette.loudness import AudioError
+    from marionette.music.feature import AudioError
+    from marionette.music.sound_card import input_devices
     try:
         devices = input_devices()
     except AudioError as exc:           # no sounddevice package, or no PortAudio library

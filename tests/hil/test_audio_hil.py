@@ -18,12 +18,12 @@ from audio_support import (SINK, play_into_sink, pulse_device, recording_env, st
                            stop_server)
 from hil_support import dance_from_home
 from marionette._core import FLAG_SOURCE_LOST, FLAG_UNFOLLOWED
-from marionette.bench.music import synthesize
 from marionette.config import load_config
-from marionette.live_audio import LiveLoudness, _choose, input_devices
-from marionette.loudness import AudioError, wav_frames, write_wav
+from marionette.music.feature import AudioError, wav_frames, write_wav
+from marionette.music.sound_card import SoundCard, _choose, input_devices
 from marionette.recorder import read_flight_record
 from marionette.show import Show
+from marionette.sim.music import synthesize
 
 T = 0.020                       # tick period of the bundled figure [s]
 # measured here (2 cores, PulseAudio 16.1, PortAudio 19.6): the first frame
@@ -87,7 +87,7 @@ def test_frames_arrive_at_50_hz_and_the_latency_is_reported(pulse, music, monkey
 
     player = play_into_sink(wav)
     try:
-        with LiveLoudness(take, device=pulse["index"], onsets=True) as source:
+        with SoundCard(take, device=pulse["index"], onsets=True) as source:
             assert source.latency is not None and 0 < source.latency < 0.5, source.latency
             deadline = time.monotonic() + 6.0
             while (not arrivals or arrivals[-1] - arrivals[0] < 4.0) and time.monotonic() < deadline:
@@ -188,7 +188,7 @@ def test_a_silent_source_is_lost_after_half_a_second(pulse, monkeypatch):
     pid = int(subprocess.run(["pgrep", "-x", "-n", "pulseaudio"], capture_output=True, text=True,
                              check=True).stdout.split()[0])
     lost = []
-    source = LiveLoudness(lambda v: None, device=pulse["index"], on_lost=lost.append).start()
+    source = SoundCard(lambda v: None, device=pulse["index"], on_lost=lost.append).start()
     try:
         deadline = time.monotonic() + 5.0
         while source.frames < 25 and time.monotonic() < deadline:
@@ -231,5 +231,5 @@ def test_devices_by_index_digits_and_name_part(pulse):
     with pytest.raises(AudioError, match="give an index or a part of the name"):
         _choose(devices, 1.5)
     # and the source itself, on the real device list
-    source = LiveLoudness(lambda v: None, device=str(index))
+    source = SoundCard(lambda v: None, device=str(index))
     assert source.device["index"] == index and source.name == "pulse"

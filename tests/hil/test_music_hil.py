@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from hil_support import dance_from_home
-from marionette.bench.music import synthesize
-from marionette.loudness import wav_loudness, write_wav
+from marionette.music.feature import wav_loudness, write_wav
 from marionette.show import Show
+from marionette.sim.music import synthesize
 from marionette.transport.serial_link import SerialLink
 from test_serial_hil import SIM_PRIORITY, play
 

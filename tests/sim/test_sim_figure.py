@@ -6,7 +6,7 @@ import pytest
 
 from marionette import protocol
 from marionette.config import load_config
-from marionette.loudness import LoudnessMeter
+from marionette.music.feature import LoudnessMeter
 from marionette.sim.faults import Faults
 from marionette.sim.figure import SimFigure
 

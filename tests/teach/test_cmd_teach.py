@@ -8,7 +8,7 @@ import pytest
 import taught_show
 from marionette import cli
 from marionette.config import load_config
-from marionette.loudness import wav_frames, wav_loudness, write_wav
+from marionette.music.feature import wav_frames, wav_loudness, write_wav
 from marionette.progress import Progress
 from marionette.show import load_show
 from marionette.teach.axis_map import map_axes

@@ -2,7 +2,7 @@
 calibrate -> teach -> play as README.md shows."""
 import numpy as np
 
-from marionette.loudness import FRAME_PERIOD, loudness, read_wav, wav_loudness
+from marionette.music.feature import FRAME_PERIOD, loudness, read_wav, wav_loudness
 from marionette.teach import make_sample
 from marionette.teach.make_sample import SAMPLE_DIR, sample_music
 

@@ -20,8 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from marionette._core import FLAG_SOURCE_LOST, FLAG_UNFOLLOWED
-
-from marionette.follow import OPTIONS, STATES
+from marionette.music.follower import OPTIONS, STATES
 
 SEARCHING, LOCKED, WAITING = (STATES.index(s) for s in ("searching", "locked", "waiting"))
 POLL_INTERVAL = 0.1             # how often the watcher reads the snapshot [s]

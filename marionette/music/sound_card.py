@@ -1,21 +1,22 @@
-"""Live loudness from a sound card: audio blocks in, one loudness frame per
-tick out, to a callback (e.g. ``Engine.push_loudness``).
+"""The live music from a sound card: audio blocks in, one loudness frame per
+tick out, to a sink (e.g. ``Engine.push_loudness``); a live source as
+marionette.music.source declares it.
 
-    from marionette.live_audio import LiveLoudness
-    with LiveLoudness(engine.push_loudness, device="USB Audio") as source:
+    from marionette.music.sound_card import SoundCard
+    with SoundCard(engine.push_loudness, device="USB Audio") as source:
         engine.start()
         ...
 
-The frames are the same feature as the stored loudness (marionette.loudness:
+The frames are the same feature as the stored loudness (marionette.music.feature:
 band RMS of each 20 ms of audio, linear), so teach and show time agree;
 the follower is insensitive to the volume and the sample rate. Capture runs
 on the sound card's sample rate (its default, or the one asked for), mono
 (channels averaged). PortAudio's thread calls ``_on_block`` with each block;
-the frames it completes go to the callback in that thread, in order.
+the frames it completes go to the sink in that thread, in order.
 
 The sound card comes through the optional ``sounddevice`` package (the
 ``audio`` extra: ``pip install 'marionette[audio]'``). Without it, without
-PortAudio, or without an input device, LiveLoudness raises AudioError
+PortAudio, or without an input device, SoundCard raises AudioError
 saying which and what to do.
 
 While it runs, the source reports: the stream's input latency
@@ -32,8 +33,9 @@ from typing import Callable
 
 import numpy as np
 
-from marionette.loudness import FRAME_PERIOD, AudioError, LoudnessMeter, OnsetMeter
-from marionette.stderr_catch import StderrCatcher
+from marionette.music.feature import FRAME_PERIOD, AudioError, LoudnessMeter, OnsetMeter
+from marionette.music.source import LiveSource, Sink
+from marionette.music.stderr_catch import StderrCatcher
 
 BLOCK_PERIOD = 0.010            # capture block [s]: half a frame, so frames leave on time
 LOST_SILENCE = 0.5              # no block for this long while running: the source is lost [s]
@@ -115,11 +117,11 @@ def _summarize(lines: list[str], most: int = 3) -> str:
     return "; ".join(items[:most]) + (f"; {more} more" if more > 0 else "")
 
 
-class LiveLoudness:
-    """A sound card as a source of loudness frames.
+class SoundCard(LiveSource):
+    """A sound card as a live source (marionette.music.source).
 
-    callback(value) gets each frame (linear loudness >= 0, one per period
-    [s] of audio); with onsets=True callback(value, onset), the frame's
+    sink(value) gets each frame (linear loudness >= 0, one per period
+    [s] of audio); with onsets=True sink(value, onset), the frame's
     onset strength [dB] beside it (``Engine.push_loudness`` takes both).
     device: index (int or digit string) or part of the name (None: the
     first input); sample_rate [Hz] (None: the device's default); channels
@@ -130,23 +132,22 @@ class LiveLoudness:
     audio came for LOST_SILENCE while it ran (FIRST_BLOCK_WAIT before the
     first block). ``lost_reason`` keeps the reason (None while all is well).
     With catch_stderr, what PortAudio and ALSA print on stderr while the
-    stream is open is kept off the terminal (marionette.stderr_catch) and
+    stream is open is kept off the terminal (marionette.music.stderr_catch) and
     folded into the reason; ``messages`` has the lines.
 
     Reported: ``frames`` delivered, ``overflows`` (blocks PortAudio flagged
     as an input overflow: audio was dropped before it reached us),
     ``underflows`` (blocks flagged as input underflow), ``refused`` (frames
-    the callback raised on; ``refused_error`` the newest such error),
+    the sink raised on; ``refused_error`` the newest such error),
     ``latency`` [s] (the stream's input latency, once started).
     """
 
-    def __init__(self, callback: Callable[..., object], device=None,
+    def __init__(self, sink: Sink | None, device=None,
                  sample_rate: float | None = None, channels: int = 1,
                  period: float = FRAME_PERIOD, sd=None, onsets: bool = False,
                  on_lost: Callable[[str], object] | None = None, catch_stderr: bool = True):
+        super().__init__(sink, on_lost)
         self.sd = sd or import_sounddevice()
-        self.callback = callback
-        self.on_lost = on_lost
         self.catch_stderr = catch_stderr
         self.device = _choose(input_devices(self.sd), device)
         self.sample_rate = float(sample_rate or self.device["sample_rate"])          # [Hz]
@@ -162,12 +163,10 @@ class LiveLoudness:
                              f"channel(s) at {self.sample_rate:g} Hz: {exc}") from None
         self.meter = LoudnessMeter(self.sample_rate, period)       # AudioError below 8 kHz
         self.onset_meter = OnsetMeter(self.sample_rate, period) if onsets else None
-        self.frames = 0                 # frames delivered
         self.overflows = 0              # blocks flagged input overflow
         self.underflows = 0             # blocks flagged input underflow
-        self.refused = 0                # frames the callback raised on
+        self.refused = 0                # frames the sink raised on
         self.refused_error: str | None = None
-        self.lost_reason: str | None = None
         self.messages: list[str] = []   # PortAudio / ALSA lines caught off stderr
         self._latency: float | None = None                   # [s]
         self._lock = threading.Lock()
@@ -190,7 +189,7 @@ class LiveLoudness:
         before a block reaches us its newest sample came in (None before
         start()). A frame is complete with the block that ends it, so this
         is the age of the newest frame's audio end when the frame is handed
-        to the callback: the default for the [follow] latency."""
+        to the sink: the default for the [follow] latency."""
         return self._latency
 
     # --- PortAudio's thread --------------------------------------------------------------
@@ -213,11 +212,13 @@ class LiveLoudness:
             self._wake.set()
             return
         for i, v in enumerate(values):
+            if self.sink is None:       # no sink yet: dropped
+                continue
             try:
                 if onsets is None:
-                    self.callback(float(v))
+                    self.sink(float(v))
                 else:
-                    self.callback(float(v), float(onsets[i]))
+                    self.sink(float(v), float(onsets[i]))
             except Exception as exc:    # the consumer's trouble, not the source's
                 self.refused += 1
                 self.refused_error = f"{type(exc).__name__}: {exc}"
@@ -279,7 +280,7 @@ class LiveLoudness:
 
     # --- start and stop ------------------------------------------------------------------
 
-    def start(self) -> "LiveLoudness":
+    def start(self) -> "SoundCard":
         if self._stream is not None:
             return self
         self._stopping.clear()
@@ -325,12 +326,6 @@ class LiveLoudness:
             self._lose(f"stopping the stream failed: {failed}")
         if self.catch_stderr:
             StderrCatcher.shared().remove(self._on_library_line)
-
-    def __enter__(self) -> "LiveLoudness":
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.stop()
 
 
 def _quietly(action) -> str | None:

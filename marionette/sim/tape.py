@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from marionette.loudness import FRAME_PERIOD
+from marionette.music.feature import FRAME_PERIOD
 
 
 @dataclass(frozen=True)

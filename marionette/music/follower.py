@@ -1,7 +1,7 @@
 """Music following from Python: the C follower (ext/mar_follow.c) over a
 stored loudness, fed live loudness frames one per tick.
 
-    from marionette.follow import Follower
+    from marionette.music.follower import Follower
     f = Follower(show.loudness, config.follow, period=config.tick_period)
     track = f.run(live_frames)          # arrays, one entry per tick
     out = f.step(frame)                 # one tick (NaN: no frame this tick)
@@ -99,7 +99,7 @@ def cue_ticks(start: float | None, n_stored: int, period: float, what: str = "st
 class Follower:
     """The C follower over stored (linear loudness, one value per tick, >= 0).
 
-    onset: the stored onset strength (marionette.loudness.onsets, [dB], one
+    onset: the stored onset strength (marionette.music.feature.onsets, [dB], one
     per tick, >= 0) or None. With it the tracker places its correlation
     peak on the loudness plus onset_weight times the onset, which a room's
     colouring does not shift, wherever the live frames bring onsets too
