@@ -23,7 +23,7 @@
  * (quiet, sustained music), so such windows barely move the estimate; a
  * window that is too quiet, correlates too little or lands outside the
  * gate is not used: the position runs on at the rate (flywheel, HOLDING).
- * Once a bad stretch has started the search beside, REGAIN_TICKS fitting
+ * Once a bad stretch has started the search beside, REGAIN_S of fitting
  * measurements in a row end the hold, not one.
  *
  * Paper mode. Same correlation at lags -1, 0, +1 and rate 1: the position
@@ -65,7 +65,7 @@
  * and locks on a clear peak there (a deck that backs up on restart, a stop
  * placed a little late), or around the place the music would have
  * reached had the tape not stopped (a fade read as a stop); without one
- * the tracker confirms the place after NEAR_TICKS. Silence or unclear
+ * the tracker confirms the place after NEAR_S. Silence or unclear
  * music in probation sends it to the whole-piece search: a jump into a
  * quiet passage does not loop through pauses.
  *
@@ -94,9 +94,9 @@
 #define NEAR_LAGS 50            /* near search reach -50..50 (1 s either way) [ticks] */
 #define NEAR_RIVAL_LAGS 150     /* ... and every place within 3 s either way is its rival [ticks] */
 #define MAX_LAGS NEAR_RIVAL_LAGS
-#define LEVEL_RELEASE_DB 0.1    /* running peak level falls this much per tick [dB] */
+#define LEVEL_RELEASE 5.0       /* running peak level falls this fast [dB/s] */
 #define TINY 1e-10              /* loudness floor before the logarithm [full scale] */
-#define FLOOR_BLOCK 50          /* noise floor: minimum over blocks of this many frames [ticks] ... */
+#define FLOOR_BLOCK_S 1.0       /* noise floor: minimum over blocks this long [s] ... */
 #define FLOOR_BLOCKS 20         /* ... over the last this many blocks (20 s) */
 #define LOW_DB 10.0             /* a frame this far below the expected level is "low" [dB] */
 #define NEAR_FLOOR_DB 6.0       /* ... and this close to the noise floor is "silent" [dB] */
@@ -106,11 +106,11 @@
 #define AUDIBLE_DB 6.0          /* expected level this far over the floor counts as music [dB] */
 #define RESUME_DB 10.0          /* a frame this far over the floor is music again [dB] */
 #define RESUME_VAR 16.0         /* position variance after a resume [tick^2] */
-#define PAUSE_ALPHA 0.2         /* the silence's level estimate, smoothing per frame [1] */
+#define PAUSE_ALPHA 0.2         /* the silence's level estimate, smoothing per REF_PERIOD [1] */
 #define MIN_RESUME_DB 3.0       /* ... or less where the music is quiet, not below this [dB] */
 #define LOUD_DB 15.0            /* stored frames within this of the stored level count for the gain [dB] */
-#define GAIN_STEP_DB 0.5        /* the gain estimate moves at most this per frame [dB] */
-#define GAIN_ALPHA 0.1          /* live-minus-stored gain estimate smoothing per frame [1] */
+#define GAIN_STEP 25.0          /* the gain estimate moves at most this fast [dB/s] */
+#define GAIN_ALPHA 0.1          /* live-minus-stored gain estimate smoothing per REF_PERIOD [1] */
 #define GAIN_SLOW_ALPHA 0.02    /* ... and its slow twin's (a time constant of 1 s) [1] */
 #define TURNING_DB 2.0          /* the two this far apart: the volume knob is turning [dB] */
 #define DISTINCT 25.0           /* candidates this far apart are different places [ticks] */
@@ -124,41 +124,48 @@
 #define KAPPA_LOCK_Z 0.08       /* a lock needs peaks at least this sharp in both halves, in Fisher z
                                  * (curvature / (1 - rho^2): near rho = 1 a slight drop is a clear one) [1/tick^2] */
 #define STEADY_RANGE_DB 3.0     /* a pause's frames stay within this range (hiss), music moves more [dB] */
-#define H_SLOW 0.003            /* tracking peak height: long-run average, per accepted measurement [1] */
-#define H_FAST 0.1              /* ... short-run average, per measured (not quiet) tick [1] */
+#define H_SLOW 0.003            /* tracking peak height: long-run average, per measurement and REF_PERIOD [1] */
+#define H_FAST 0.1              /* ... short-run average, per measured (not quiet) REF_PERIOD [1] */
 #define DOUBT_DROP 0.25         /* short-run height this far under the long-run one: doubt the place [1] */
 #define CLEAR_DB 15.0           /* doubt only where the live music averages this far over the noise floor [dB] */
 #define NEUTRAL_DB 1.0          /* a frame within this of a silent run's level range ... */
-#define REGAIN_TICKS 25         /* measurements in a row that end a hold with the search beside [ticks] */
-#define PROBATION_BAD 10        /* bad ticks in probation (after a resume) that send the place back to the search */
+#define REGAIN_S 0.5            /* measurements in a row for this long end a hold with the search beside [s] */
+#define PROBATION_BAD_S 0.2     /* bad ticks for this long in probation (after a resume) send the place to the search [s] */
 #define ONSET_DB 1.5            /* resume: the music began at the first frame of the run this far over the silence [dB] */
 #define ONSET_SIGMAS 4.0        /* ... or this many of the silence's frame-to-frame deviations */
-#define RESUME_MIN_WINDOW 16    /* fewest live frames for a tracking measurement after a resume [ticks] */
+#define RESUME_MIN_WINDOW_S 0.32  /* fewest live frames for a tracking measurement after a resume [s] */
 #define GAP_DB 3.0              /* stored music this far under the silence would not be heard [dB] */
 #define SPARSE_EVIDENCE 3       /* silent frames where music is expected ... */
-#define SPARSE_SPAN 50          /* ... spread over a hiss-flat stretch this long also mean a pause [ticks] */
+#define SPARSE_SPAN_S 1.0       /* ... spread over a hiss-flat stretch this long also mean a pause [s] */
 #define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */
-#define NEAR_TICKS 250          /* the near search gives up this long after the restart [ticks] */
+#define NEAR_S 5.0              /* the near search gives up this long after the restart [s] */
 #define NEAR_SEP 4              /* a rival peak of the near search lies at least this far away [ticks] */
-#define PATIENT_AFTER 250       /* after this much first search, the verification window grows ... [ticks] */
-#define LONG_VERIFY 500         /* ... up to this: alike, slow music needs more audio [ticks] */
+#define PATIENT_AFTER_S 5.0     /* after this much first search, the verification window grows ... [s] */
+#define LONG_VERIFY_S 10.0      /* ... up to this: alike, slow music needs more audio [s] */
 #define STOP_TIE_DB2 1.0        /* splits whose misfit differs less than this tie [dB^2] */
 #define STOP_SPAN 256           /* splits the stop fit weighs, at most [ticks] */
 #define MAX_RATE_FIX 0.03       /* a verification corrects the rate by at most this [stored ticks per tick] */
 #define ALT_REACH 10            /* the never-stopped place is taken only this close to its line [ticks] */
-#define LONG_HOLD 50            /* a hold this long without a measurement leaves the place unproven [ticks] ... */
+#define LONG_HOLD_S 1.0         /* a hold this long without a measurement leaves the place unproven [s] ... */
 #define PROOF_CONF 0.5          /* ... until the confidence is back to this [1] */
-#define SEARCH_GAP 50           /* steady hiss this long while searching: the tape stood still [ticks] */
-#define LEADER_FRAMES 10        /* a cue's leader: steady frames before the music (0.2 s) [ticks] ... */
-#define LEADER_WAIT 25          /* ... none by this many frames: the music played from the first [ticks] */
-#define LEADER_CHECKS 20        /* ... or music, if it fits the cue at a multiple of LEADER_WAIT, up to this [1] */
+#define SEARCH_GAP_S 1.0        /* steady hiss this long while searching: the tape stood still [s] */
+#define LEADER_S 0.2            /* a cue's leader: steady frames before the music [s] ... */
+#define LEADER_WAIT_S 0.5       /* ... none by then: the music played from the first frame [s] */
+#define LEADER_CHECKS 20        /* ... or music, if it fits the cue at a multiple of LEADER_WAIT_S, up to this [1] */
 #define NOTE_DB 6.0             /* ... or a frame this strong in onsets (a note's attack) [dB] */
 #define RISE_DB 6.0             /* the music starts: a frame this far over the leader [dB] ... */
 #define RISE_START_DB 1.0       /* ... its rise began at the first frame this far over it [dB] */
 #define CUE_FITS 32             /* joint fits of rate and offset on lines through the cue, after ... */
-static const size_t CUE_FIT_AT[CUE_FITS] = {        /* ... this much music [ticks]: every 0.1 s */
-    25, 30, 35, 40, 45, 50, 55, 60, 65, 70, 75, 80,   /* while the rate is open, then every 0.5 s */
-    85, 90, 95, 100, 125, 150, 175, 200, 225, 250, 275, 300, 325, 350, 375, 400, 425, 450, 475, 500};
+#define REF_PERIOD 0.020        /* the tick the per-tick smoothing constants were set at [s] */
+#define FIT_MIN_S 0.32          /* a line fit needs at least this much music [s] */
+#define RESUME_LOOK_S 0.5       /* a pause expects the music of this long after the stop [s] */
+#define ONSET_BACK_S 1.0        /* a resume looks this far back for the rise [s] */
+#define GAP_AHEAD_S 1.0         /* ... and this far ahead for a gap in the music [s] */
+#define CLEAR_WINDOW_S 1.0      /* clear music: the live level over this long (half of it heard) [s] */
+static const double CUE_FIT_AT_S[CUE_FITS] = {      /* ... this much music [s]: every 0.1 s */
+    0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6,     /* while the rate is open, */
+    1.7, 1.8, 1.9, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 5.5, 6.0,     /* then every 0.5 s */
+    6.5, 7.0, 7.5, 8.0, 8.5, 9.0, 9.5, 10.0};
 #define CUE_REFUTE_FIT 15       /* the fit (index) that refutes the cue when nothing fits (2 s) */
 #define CUE_RATE_SPAN 0.07      /* rates 1 +- this [stored ticks per tick] ... */
 #define CUE_RATE_STEP 0.005     /* ... in these steps */
@@ -197,6 +204,13 @@ typedef struct {
     double hold_after, search_after, lost_after, quiet_lost_after, pause_after;  /* [ticks] */
     double meas_noise;          /* [stored ticks] */
     double rate_var;            /* the rate's variance growth per tick [1] */
+    /* the algorithm's own times and rates (the #defines above) per tick */
+    uint64_t floor_block, sparse_span, regain, probation_bad, near, patient_after, long_verify,
+        long_hold, search_gap, leader, leader_wait;     /* [ticks] */
+    size_t resume_min_window, fit_min, resume_look, onset_back, gap_ahead, clear_window;  /* [ticks] */
+    size_t cue_fit_at[CUE_FITS];  /* [ticks] */
+    double level_release, gain_step;    /* [dB per tick] */
+    double gain_alpha, gain_slow_alpha, pause_alpha, h_fast, h_slow;   /* smoothing per tick [1] */
 } tick_options;
 
 struct mar_follow {
@@ -346,6 +360,10 @@ static double ticks_of(double seconds, double period)
 
 static size_t whole_ticks(double seconds, double period) { return (size_t)nearbyint(seconds / period); }
 
+/* A smoothing constant set per REF_PERIOD, per tick of period [s] (the
+ * same time constant). */
+static double per_tick(double alpha, double period) { return -expm1(log1p(-alpha) * period / REF_PERIOD); }
+
 /* The options in ranges (the table's), then in ticks and against each
  * other: 0, or -EINVAL and *problem says which and why. */
 static int tick_options_of(const mar_follow_options *o, tick_options *tk, const char **problem)
@@ -378,6 +396,32 @@ static int tick_options_of(const mar_follow_options *o, tick_options *tk, const 
     tk->pause_after = fmax(1.0, ticks_of(o->pause_after, T));
     tk->meas_noise = o->meas_noise / T;
     tk->rate_var = o->rate_walk * T;
+    tk->floor_block = whole_ticks(FLOOR_BLOCK_S, T);
+    tk->sparse_span = whole_ticks(SPARSE_SPAN_S, T);
+    tk->regain = whole_ticks(REGAIN_S, T);
+    tk->probation_bad = whole_ticks(PROBATION_BAD_S, T);
+    tk->near = whole_ticks(NEAR_S, T);
+    tk->patient_after = whole_ticks(PATIENT_AFTER_S, T);
+    tk->long_verify = whole_ticks(LONG_VERIFY_S, T);
+    tk->long_hold = whole_ticks(LONG_HOLD_S, T);
+    tk->search_gap = whole_ticks(SEARCH_GAP_S, T);
+    tk->leader = whole_ticks(LEADER_S, T);
+    tk->leader_wait = whole_ticks(LEADER_WAIT_S, T);
+    tk->resume_min_window = whole_ticks(RESUME_MIN_WINDOW_S, T);
+    tk->fit_min = whole_ticks(FIT_MIN_S, T);
+    tk->resume_look = whole_ticks(RESUME_LOOK_S, T);
+    tk->onset_back = whole_ticks(ONSET_BACK_S, T);
+    tk->gap_ahead = whole_ticks(GAP_AHEAD_S, T);
+    tk->clear_window = whole_ticks(CLEAR_WINDOW_S, T);
+    for (int i = 0; i < CUE_FITS; i++)
+        tk->cue_fit_at[i] = whole_ticks(CUE_FIT_AT_S[i], T);
+    tk->level_release = LEVEL_RELEASE * T;
+    tk->gain_step = GAIN_STEP * T;
+    tk->gain_alpha = per_tick(GAIN_ALPHA, T);
+    tk->gain_slow_alpha = per_tick(GAIN_SLOW_ALPHA, T);
+    tk->pause_alpha = per_tick(PAUSE_ALPHA, T);
+    tk->h_fast = per_tick(H_FAST, T);
+    tk->h_slow = per_tick(H_SLOW, T);
     /* at most MAX_RATES rates, whatever the rate range */
     tk->rate_step = fmax(o->rate_step, (o->rate_max - o->rate_min) / (MAX_RATES - 1) * 1.000001);
     if (tk->min_window < 4 || tk->paper_window < 4)
@@ -407,13 +451,13 @@ int mar_follow_check_options(const mar_follow_options *opt, const char **problem
 static double level_db(double x) { return 20.0 * log10(x + TINY); }
 
 /* The feature of one frame: level clamped at a running peak minus range. */
-static double feature(double *lvl, int *started, double db, double range_db)
+static double feature(double *lvl, int *started, double db, double range_db, double release)
 {
     if (!*started) {
         *lvl = db;
         *started = 1;
     }
-    *lvl = fmax(db, *lvl - LEVEL_RELEASE_DB);
+    *lvl = fmax(db, *lvl - release);
     return fmax(db, *lvl - range_db);
 }
 
@@ -464,8 +508,8 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
     f->n = n_stored;
     f->onsets = onset != NULL;
     size_t longest = tk.window > tk.verify_window ? tk.window : tk.verify_window;
-    if (longest < LONG_VERIFY)
-        longest = LONG_VERIFY;
+    if (longest < tk.long_verify)
+        longest = tk.long_verify;
     if (tk.paper_window > longest)
         longest = tk.paper_window;
     size_t search_span = (size_t)((double)(tk.search_window + 2) * (double)tk.search_block / opt->rate_min) + 2;
@@ -526,7 +570,7 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
     int started = 1;
     for (size_t i = 0; i < n_stored; i++) {
         f->sdb[i] = level_db(stored[i]);
-        f->sf[i] = feature(&lvl, &started, f->sdb[i], opt->range_db);
+        f->sf[i] = feature(&lvl, &started, f->sdb[i], opt->range_db, tk.level_release);
     }
     double silence = f->s_level - opt->range_db;
     for (long i = 1; i <= f->pad; i++) {
@@ -1035,7 +1079,7 @@ static int half_peaks_ch(mar_follow *f, int onset, double p, double r, size_t ag
     long j0;
     double center;
     size_t m = ages >= f->tk.min_window ? resample_ch(f, onset ? f->lo : f->lf, p, r, ages, &j0, &center) : 0;
-    if (m < 16)
+    if (m < f->tk.fit_min)
         return 0;
     size_t h = m / 2;
     double rho[2 * MAX_LAGS + 1];
@@ -1072,15 +1116,15 @@ static void line_fix(const half_peak hp[2], double *ep, double *er)
 }
 
 /* The verification window now [ticks]: verify_window, growing once the
- * first search has gone on for PATIENT_AFTER ticks, up to LONG_VERIFY.
+ * first search has gone on for PATIENT_AFTER_S, up to LONG_VERIFY_S.
  * (A search after a jump or a loss keeps verify_window: its first frames
  * may still be of the old place.) */
 static size_t verify_cap(const mar_follow *f)
 {
     uint64_t waited = !f->located && f->t > f->search_from ? f->t - f->search_from : 0;
-    size_t cap = f->tk.verify_window, limit = cap > LONG_VERIFY ? cap : LONG_VERIFY;
-    if (waited > PATIENT_AFTER)
-        cap += (size_t)(waited - PATIENT_AFTER);
+    size_t cap = f->tk.verify_window, limit = cap > f->tk.long_verify ? cap : f->tk.long_verify;
+    if (waited > f->tk.patient_after)
+        cap += (size_t)(waited - f->tk.patient_after);
     return cap < limit ? cap : limit;
 }
 
@@ -1252,8 +1296,8 @@ static cand *lock_choice(mar_follow *f)
  * crept up to the music would make ordinary quiet frames look like a pause. */
 static void note_floor(mar_follow *f, double db)
 {
-    size_t b = (size_t)(f->floor_frames / FLOOR_BLOCK) % FLOOR_BLOCKS;
-    if (f->floor_frames % FLOOR_BLOCK == 0)
+    size_t b = (size_t)(f->floor_frames / f->tk.floor_block) % FLOOR_BLOCKS;
+    if (f->floor_frames % f->tk.floor_block == 0)
         f->floor_min[b] = INFINITY;               /* a new block replaces the oldest */
     f->floor_min[b] = fmin(f->floor_min[b], db);
     f->floor_frames++;
@@ -1282,7 +1326,7 @@ static void take_frame(mar_follow *f, double live, double onset, uint32_t *flags
     }
     double db = level_db(live);
     f->ldb[slot] = db;
-    f->lf[slot] = feature(&f->lvl, &f->lvl_started, db, f->opt.range_db);
+    f->lf[slot] = feature(&f->lvl, &f->lvl_started, db, f->opt.range_db, f->tk.level_release);
     /* a frame without its onset (a source that has none) leaves a gap in the
      * onset feature; a window without onsets tracks on the loudness alone */
     f->lo[slot] = f->lf[slot] + (f->onsets ? f->opt.onset_weight * onset : 0.0);
@@ -1366,7 +1410,7 @@ static int detect_pause(mar_follow *f, int have)
     /* in a quiet passage evidence is sparse: a few silent frames where music
      * should be heard, and nothing but hiss in between for a second, will do */
     return (double)f->silent_run >= f->tk.pause_after
-        || (f->silent_run >= SPARSE_EVIDENCE && f->t - f->silent_start >= SPARSE_SPAN);
+        || (f->silent_run >= SPARSE_EVIDENCE && f->t - f->silent_start >= f->tk.sparse_span);
 }
 
 /* Live minus stored level [dB] on the line (p, r), over loud stored frames:
@@ -1389,17 +1433,17 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
         f->have_gain = 1;
     } else {
         /* a frame far below is a dropout or a pause, not the volume knob; and
-         * the knob turns slowly: at most GAIN_STEP_DB per frame */
+         * the knob turns slowly: at most GAIN_STEP */
         double diff = sum / (double)cnt - f->gain;
         if (diff > -LOW_DB) {
-            double step = fmax(-GAIN_STEP_DB, fmin(GAIN_STEP_DB, GAIN_ALPHA * diff));
+            double step = fmax(-f->tk.gain_step, fmin(f->tk.gain_step, f->tk.gain_alpha * diff));
             f->gain += step;
             /* the hiss is on the tape, before the knob: the floor moves with it */
             for (int b = 0; b < FLOOR_BLOCKS; b++)
                 f->floor_min[b] += step;
             f->nf += step;
         }
-        f->gain_slow += GAIN_SLOW_ALPHA * (f->gain - f->gain_slow);
+        f->gain_slow += f->tk.gain_slow_alpha * (f->gain - f->gain_slow);
     }
 }
 
@@ -1422,8 +1466,8 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
     size_t ages = usable(f, f->seg_start, f->tk.window);
     /* right after a resume a short window corrects the restart point early
      * (the gate and the probation keep it from doing harm) */
-    size_t min_window = f->probation && RESUME_MIN_WINDOW < f->tk.min_window ? RESUME_MIN_WINDOW
-                                                                               : f->tk.min_window;
+    size_t min_window = f->probation && f->tk.resume_min_window < f->tk.min_window ? f->tk.resume_min_window
+                                                                                   : f->tk.min_window;
     *quiet = 0;
     if (ages < min_window) {
         *quiet = 2;                                   /* too little audio yet: no evidence */
@@ -1448,7 +1492,7 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
         return 0;
     }
     double d = peak(rho, lags, &h, &kappa, &edge);
-    f->h_fast += H_FAST * (h - f->h_fast);
+    f->h_fast += f->tk.h_fast * (h - f->h_fast);
     if (edge || h < f->opt.track_threshold || !(kappa > 0.0))
         return 0;
     if (f->onsets) {
@@ -1473,7 +1517,7 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
     f->P00 -= k0 * hp0;
     f->P01 -= k0 * hp1;
     f->P11 -= k1 * hp1;
-    f->h_slow += H_SLOW * (h - f->h_slow);
+    f->h_slow += f->tk.h_slow * (h - f->h_slow);
     double qual = (h - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->conf += 0.05 * (qual - f->conf);
     *flags |= MAR_FOLLOW_F_MEASURED;
@@ -1567,8 +1611,8 @@ static double line_fit(mar_follow *f, size_t ages, double *best_r, double *best_
 /* WAITING at the cue: has the music started? Before it, the input is a
  * steady leader (hiss, a room, digital silence: frames within
  * STEADY_RANGE_DB of each other); the music is a frame RISE_DB over it, and
- * it began at the first frame of that rise. No leader within LEADER_WAIT
- * frames: the music played from the first frame. Returns the onset's step
+ * it began at the first frame of that rise. No leader within LEADER_WAIT_S:
+ * the music played from the first frame. Returns the onset's step
  * and 1 when the music started. */
 static int music_started(mar_follow *f, int have, uint64_t *onset)
 {
@@ -1586,21 +1630,21 @@ static int music_started(mar_follow *f, int have, uint64_t *onset)
     double strength = f->onsets && f->opt.onset_weight > 0.0 ? (f->lo[slot] - f->lf[slot]) / f->opt.onset_weight
                                                              : NAN;     /* NaN: the level decides */
     if (strength > NOTE_DB) {
-        *onset = f->leader < LEADER_FRAMES ? f->wait_start : f->rise_step ? f->rise_step : f->t;
+        *onset = f->leader < f->tk.leader ? f->wait_start : f->rise_step ? f->rise_step : f->t;
         return 1;
     }
-    if (f->leader < LEADER_FRAMES) {                    /* the leader forming */
+    if (f->leader < f->tk.leader) {                     /* the leader forming */
         double lo = f->leader ? fmin(f->lead_lo, db) : db, hi = f->leader ? fmax(f->lead_hi, db) : db;
         if (f->leader && hi - lo > STEADY_RANGE_DB)
             f->leader = 0, lo = hi = db;                /* not steady: start again here */
         f->leader++, f->lead_lo = lo, f->lead_hi = hi;
-        if (f->leader < LEADER_FRAMES && heard >= LEADER_WAIT) {
+        if (f->leader < f->tk.leader && heard >= f->tk.leader_wait) {
             *onset = f->t + 1 - heard;                  /* no leader: music from the first frame */
             return 1;
         }
         return 0;
     }
-    if (heard % LEADER_WAIT == 0 && heard <= LEADER_CHECKS * LEADER_WAIT) {
+    if (heard % f->tk.leader_wait == 0 && heard <= LEADER_CHECKS * f->tk.leader_wait) {
         /* a steady start may be the music itself (a held chord): it is, if
          * the frames since the first fit the stored music from the cue */
         double r, d, kappa;
@@ -1720,7 +1764,7 @@ static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
 static void cue_fit(mar_follow *f, uint32_t *flags)
 {
     size_t ages = (size_t)(f->t + 1 - f->cue_onset);
-    if (ages < CUE_FIT_AT[f->cue_fits])
+    if (ages < f->tk.cue_fit_at[f->cue_fits])
         return;
     f->cue_fits++;
     double best_r, best_d, best_kappa;
@@ -1792,7 +1836,7 @@ static void start_near(mar_follow *f, double centre, double r, uint64_t from)
     f->near_p = centre;
     f->near_r = r > 0.0 ? r : 1.0;
     f->near_from = from;
-    f->near_end = f->t + NEAR_TICKS;
+    f->near_end = f->t + f->tk.near;
     f->near_prev = NAN;
     f->near_confirmed = 0;
     f->alt_p = NAN;
@@ -1897,7 +1941,7 @@ static void near_search(mar_follow *f, uint32_t *flags)
 }
 
 /* While searching there is no place to expect music at, so a stop shows
- * only as a run of steady hiss near the noise floor. During SEARCH_GAP or
+ * only as a run of steady hiss near the noise floor. During SEARCH_GAP_S or
  * more such frames the search does not lock; when sound returns, it starts
  * again on the frames from there on: those before may belong to another
  * stretch of tape (it may have been wound), and a silence inside the
@@ -1914,7 +1958,7 @@ static void search_gap(mar_follow *f)
         f->gap_run++;
         return;
     }
-    if (f->gap_run >= SEARCH_GAP && db > f->gap_hi + MIN_RESUME_DB) {
+    if (f->gap_run >= f->tk.search_gap && db > f->gap_hi + MIN_RESUME_DB) {
         stop_search(f);
         start_search(f, f->t);
     }
@@ -1964,7 +2008,7 @@ static void run_search(mar_follow *f, uint32_t *flags)
         verify(f, e);
     dedup(f);
     /* no lock during a stop: its silence would be matched to a quiet passage */
-    cand *best = f->gap_run >= SEARCH_GAP ? NULL : lock_choice(f);
+    cand *best = f->gap_run >= f->tk.search_gap ? NULL : lock_choice(f);
     if (best)
         lock_on(f, best, flags);
 }
@@ -2042,7 +2086,7 @@ static void pause_now(mar_follow *f)
     f->pause_start = f->t;
     /* resume on frames halfway up from the silence to the music expected where it stopped */
     double expected = -INFINITY;
-    for (int k = 0; k < 25; k++)
+    for (size_t k = 0; k < f->tk.resume_look; k++)
         expected = fmax(expected, stored_db_at(f, f->frozen + (double)k));
     double margin = expected + f->gain - f->pause_db;
     f->resume_db = fmin(RESUME_DB, fmax(MIN_RESUME_DB, 0.5 * margin));
@@ -2065,8 +2109,8 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
         if (have) {                                   /* follow the silence's level and its wobble */
             double prev = f->ldb[ring(f, f->t - 1)];
             if (!isnan(prev) && f->t > f->pause_start)
-                f->pause_dev += PAUSE_ALPHA * (fabs(db - prev) - f->pause_dev);
-            f->pause_db += PAUSE_ALPHA * (db - f->pause_db);
+                f->pause_dev += f->tk.pause_alpha * (fabs(db - prev) - f->pause_dev);
+            f->pause_db += f->tk.pause_alpha * (db - f->pause_db);
         }
     }
     if (f->loud_run < 2)
@@ -2075,7 +2119,7 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
         f->r = 1.0;
     /* the music began where the frames first rose clearly over the silence
      * (a quiet entry rises slowly): look back from the run */
-    uint64_t onset = f->t + 1 - f->loud_run, limit = f->t > 50 ? f->t - 50 : 0;
+    uint64_t onset = f->t + 1 - f->loud_run, limit = f->t > f->tk.onset_back ? f->t - f->tk.onset_back : 0;
     double rise = fmax(ONSET_DB, ONSET_SIGMAS * f->pause_dev);
     if (limit < f->pause_start)
         limit = f->pause_start;
@@ -2092,7 +2136,7 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
     double from = f->frozen;
     if (f->have_gain) {
         long j = (long)floor(f->frozen);
-        for (long k = 0; k < 50; k++) {
+        for (long k = 0; k < (long)f->tk.gap_ahead; k++) {
             double x = (double)(j + k);
             if (stored_db_at(f, x) + f->gain >= f->pause_db - GAP_DB) {
                 if (x > from)
@@ -2127,13 +2171,13 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
 static int clear_music(const mar_follow *f)
 {
     double sum = 0.0;
-    size_t cnt = 0, ages = usable(f, f->seg_start, 50);
+    size_t cnt = 0, ages = usable(f, f->seg_start, f->tk.clear_window);
     for (size_t i = 0; i < ages; i++) {
         double db = f->ldb[ring(f, f->t - i)];
         if (!isnan(db))
             sum += db, cnt++;
     }
-    return cnt >= 25 && sum / (double)cnt > f->nf + CLEAR_DB;
+    return cnt >= f->tk.clear_window / 2 && sum / (double)cnt > f->nf + CLEAR_DB;
 }
 
 /* Following (LOCKED or HOLDING): one measurement, then the state. */
@@ -2170,7 +2214,7 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
     }
     /* one fitting measurement after a long bad stretch proves little (hiss
      * against a wrong place can pass): a run of them ends the hold */
-    if (f->regaining && f->regain_ok >= REGAIN_TICKS) {
+    if (f->regaining && f->regain_ok >= f->tk.regain) {
         f->regaining = 0;
         if (!f->doubt && !f->probation)
             stop_search(f);
@@ -2182,7 +2226,7 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
      * guess (a stop under the hiss goes unnoticed, and bars alike fit a
      * place bars off); not LOCKED again on a weak fit, only once the
      * confidence is back (or by a lock) */
-    if (since > LONG_HOLD)
+    if (since > f->tk.long_hold)
         f->unproven = 1;
     else if (f->conf >= PROOF_CONF)
         f->unproven = 0;
@@ -2211,7 +2255,7 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
     uint64_t bad_start = f->t + 1 - f->bad_since;
     uint64_t from = bad_start > f->tk.min_window ? bad_start - f->tk.min_window : 0;
     if ((double)f->bad_since >= f->tk.lost_after || since >= f->tk.quiet_lost_after
-        || (f->probation && f->bad_since >= PROBATION_BAD)
+        || (f->probation && f->bad_since >= f->tk.probation_bad)
         || (f->regaining && (double)f->regain_bad >= f->tk.lost_after)) {
         uint64_t at = f->probation && f->seg_start > from ? f->seg_start : from;
         f->state = MAR_FOLLOW_SEARCHING;

@@ -21,11 +21,12 @@ import pytest
 
 from marionette.config import FollowConfig, config_from_dict
 from marionette.errors import ConfigError
-from marionette.music.feature import loudness, onsets
+from marionette.music.feature import loudness, mono, onsets, read_wav
 from marionette.music.follower import (FLAGS, OPTIONS, STATES, FollowError, Follower, c_options,
                                        options_markdown, sync_ticks)
 from marionette.sim.music import synthesize
 from marionette.sim.tape import Deck, play
+from marionette.teach.make_sample import sample_path
 from conftest import figure_dict
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -702,3 +703,29 @@ def test_follow_table_in_the_figure_config():
     d["follow"] = 3
     with pytest.raises(ConfigError, match="\\[follow\\] must be a table"):
         config_from_dict(d, "f.toml")
+
+
+@pytest.mark.parametrize("period", [0.010, 0.040])
+def test_the_follower_keeps_time_at_other_tick_periods(period):
+    """Every time of the follower is in seconds, turned into ticks at
+    create: at 10 and 40 ms ticks it follows the bundled sample as at 20 ms
+    (a cue at the top on a fast tape, a pause, an unknown start 15 s in),
+    with the stored and the live loudness both made at that period."""
+    x, fs = read_wav(sample_path("music.wav"))
+    x = mono(x)
+    stored, stored_onsets = loudness(x, fs, period), onsets(x, fs, period)
+    decks = [(Deck(speed=1.03, snr_db=20, seed=2), 0.0, 3.0),
+             (Deck(speed=0.98, snr_db=20, seed=6, pauses=((8.0, 2.0),)), 0.0, 3.0),
+             (Deck(speed=1.02, snr_db=20, seed=5, start=15.0), None, 15.0)]
+    for deck, cue, lock_by in decks:
+        played = play(x, fs, deck, period=period)
+        live = loudness(played.samples, played.sample_rate, period)
+        live_onsets = onsets(played.samples, played.sample_rate, period)
+        f = Follower(stored, period=period, onset=stored_onsets)
+        f.cue(cue)
+        track = f.run(sync_ticks(live), sync_ticks(live_onsets))
+        n = min(len(track.position), len(played.truth)) - 5
+        error = np.abs(track.position[:n] * period - played.truth[:n])                # [s]
+        locked = np.flatnonzero(track.state[:n] == STATES.index("locked"))
+        assert len(locked) and locked[0] * period <= lock_by, (deck, locked[:1] * period)
+        assert np.mean(error[locked[0]:] < 0.050) >= 0.97, (deck, np.mean(error[locked[0]:] < 0.050))
