@@ -104,6 +104,8 @@ def cmd_play(args) -> int:
                     output=output, record=args.record or True, rate=args.rate,
                     follow=follow, follow_start=args.start) as engine:
             engine_box.append(engine)
+            if audio is not None and audio.lost_reason is not None:     # lost before the engine was made
+                engine.source_lost(audio.lost_reason)
             if live is not None:
                 live.sink = engine.push_loudness
             if args.realtime:
