@@ -42,8 +42,8 @@ extensions = [
               sorted(set(glob("ext/*.c")) - {"ext/mar_shape.c"}) + sorted(glob("firmware_protocol/*.c"))),
     # the offline pragmatic filter (timed parabolic moves between extrema)
     extension("marionette._shape", "marionette/_shape.pyx", ["ext/mar_shape.c"]),
-    # the music follower, for offline tools and tests (the engine links its own copy)
-    extension("marionette._follow", "marionette/_follow.pyx", ["ext/mar_follow.c"]),
+    # the music follower (ext/mar_follow*.c), for offline tools and tests (the engine links its own copy)
+    extension("marionette._follow", "marionette/_follow.pyx", sorted(glob("ext/mar_follow*.c"))),
     # the servo protocol codec, for the simulator, the transports and the tests
     extension("marionette._protocol", "marionette/_protocol.pyx", sorted(glob("firmware_protocol/*.c"))),
 ]

@@ -79,6 +79,8 @@
  * runs more than TURNING_DB ahead of its 1 s average) is the feature's
  * clamp lagging behind the knob, not a wrong place. */
 #include "mar_follow.h"
+#include "mar_follow_corr.h"
+#include "mar_follow_kf.h"
 
 #include <errno.h>
 #include <math.h>
@@ -249,8 +251,7 @@ struct mar_follow {
 
     /* tracker */
     int state;
-    double p, r;                /* [stored ticks], [stored ticks per tick] */
-    double P00, P01, P11;       /* covariance of (p, r) */
+    mar_kf kf;                  /* position [stored ticks] and rate [stored ticks per tick], their covariance */
     double conf;
     int ever;                   /* a position is known (lock, reset or cue) */
     int located;                /* ... and proven or given (lock, reset), not only cued: the first
@@ -666,13 +667,6 @@ static void stop_search(mar_follow *f)
     clear_pool(f);
 }
 
-static void kf_init(mar_follow *f, double var_p, double var_r)
-{
-    f->P00 = var_p;
-    f->P01 = 0.0;
-    f->P11 = var_r;
-}
-
 void mar_follow_reset(mar_follow *f, double position)
 {
     f->ticks_since_frame = f->unstepped = 0;
@@ -688,22 +682,22 @@ void mar_follow_reset(mar_follow *f, double position)
     stop_search(f);
     if (isfinite(position)) {
         double last = (double)f->n;
-        f->p = position < 0.0 ? 0.0 : position > last ? last : position;
-        f->r = 1.0;
+        f->kf.p = position < 0.0 ? 0.0 : position > last ? last : position;
+        f->kf.r = 1.0;
         f->ever = f->located = 1;
         f->state = MAR_FOLLOW_HOLDING;
         f->conf = 0.0;
-        kf_init(f, 1.0, 1e-4);
+        mar_kf_init(&f->kf, 1.0, 1e-4);
     } else {
-        f->p = 0.0;
-        f->r = 0.0;
+        f->kf.p = 0.0;
+        f->kf.r = 0.0;
         f->ever = f->located = 0;
         f->state = MAR_FOLLOW_SEARCHING;
         f->conf = 0.0;
-        kf_init(f, 1e6, 1e-2);
+        mar_kf_init(&f->kf, 1e6, 1e-2);
         start_search(f, f->seg_start);
     }
-    f->last = (mar_follow_out){.position = f->p, .rate = f->r, .confidence = 0.0, .state = f->state};
+    f->last = (mar_follow_out){.position = f->kf.p, .rate = f->kf.r, .confidence = 0.0, .state = f->state};
 }
 
 void mar_follow_cue(mar_follow *f, double position)
@@ -711,15 +705,15 @@ void mar_follow_cue(mar_follow *f, double position)
     mar_follow_reset(f, position);
     if (!isfinite(position))
         return;
-    size_t j = (size_t)f->p;                /* the first audible stored frame from the cue on */
+    size_t j = (size_t)f->kf.p;                /* the first audible stored frame from the cue on */
     while (j + 1 < f->n && f->sdb[j] < f->s_level - MUSIC_RANGE_DB)
         j++;
-    f->cue_from = f->p > (double)j ? f->p : (double)j;
+    f->cue_from = f->kf.p > (double)j ? f->kf.p : (double)j;
     f->state = MAR_FOLLOW_WAITING;
     f->located = 0;                         /* a cue is a claim, not yet a place */
-    f->r = 0.0;
+    f->kf.r = 0.0;
     f->wait_frames = f->leader = f->rise_step = 0;
-    f->last = (mar_follow_out){.position = f->p, .rate = 0.0, .confidence = 0.0, .state = f->state};
+    f->last = (mar_follow_out){.position = f->kf.p, .rate = 0.0, .confidence = 0.0, .state = f->state};
 }
 
 /* --- correlation along a line ------------------------------------------ */
@@ -779,73 +773,19 @@ static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0,
     return resample_ch(f, f->lf, p, r, ages, j0, center);
 }
 
-/* Pearson correlation of rs[k0 .. k0 + len) (mean removed) with the stored
- * feature at frames j0 + k0 + d + k, for d = -lags .. lags. Also returns
- * the live spread [dB]. */
+/* Pearson correlation of rs[k0 .. k0 + len) with the stored feature sfeat
+ * (prefix sums q1, q2, all padded by f->pad) at frames j0 + k0 + d + k,
+ * for d = -lags .. lags. Returns the live spread [dB]. */
 static double correlate_ch(const mar_follow *f, const double *sfeat, const double *q1, const double *q2,
                            const double *rs, size_t k0, size_t len, long j0, int lags, double *rho)
 {
-    const double *l = rs + k0;
-    double lm = 0.0;
-    for (size_t k = 0; k < len; k++)
-        lm += l[k];
-    lm /= (double)len;
-    double ll = 0.0;
-    for (size_t k = 0; k < len; k++)
-        ll += (l[k] - lm) * (l[k] - lm);
-    for (int d = -lags; d <= lags; d++) {
-        long js = j0 + (long)k0 + d;
-        const double *s = sfeat + js;
-        double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
-        size_t k = 0;
-        for (; k + 4 <= len; k += 4) {                 /* four sums: independent adds */
-            a0 += (l[k] - lm) * s[k];
-            a1 += (l[k + 1] - lm) * s[k + 1];
-            a2 += (l[k + 2] - lm) * s[k + 2];
-            a3 += (l[k + 3] - lm) * s[k + 3];
-        }
-        for (; k < len; k++)
-            a0 += (l[k] - lm) * s[k];
-        double cov = a0 + a1 + a2 + a3;
-        size_t q = (size_t)(js + f->pad);
-        double s1 = q1[q + len] - q1[q], s2 = q2[q + len] - q2[q];
-        double ss = s2 - s1 * s1 / (double)len;
-        rho[d + lags] = (ll > 1e-9 && ss > 1e-9) ? cov / sqrt(ll * ss) : 0.0;
-    }
-    return sqrt(ll / (double)len);
+    return mar_corr_lags(rs + k0, len, sfeat - f->pad, q1, q2, j0 + (long)k0 + f->pad, lags, rho);
 }
 
 static double correlate(const mar_follow *f, const double *rs, size_t k0, size_t len, long j0, int lags,
                         double *rho)
 {
     return correlate_ch(f, f->sf, f->p1, f->p2, rs, k0, len, j0, lags, rho);
-}
-
-/* Peak of rho[0 .. 2 lags]: returns its lag [ticks] refined by a parabola,
- * *peak its height, *kappa its curvature [1/tick^2], *edge 1 if the
- * maximum is at either end (not a peak). */
-static double peak(const double *rho, int lags, double *height, double *kappa, int *edge)
-{
-    int b = 0;
-    for (int i = 1; i <= 2 * lags; i++)
-        if (rho[i] > rho[b])
-            b = i;
-    *height = rho[b];
-    *edge = b == 0 || b == 2 * lags;
-    if (*edge) {
-        *kappa = 0.0;
-        return (double)(b - lags);
-    }
-    double y0 = rho[b - 1], y1 = rho[b], y2 = rho[b + 1];
-    double den = y0 - 2.0 * y1 + y2;
-    *kappa = -den;
-    double off = den < 0.0 ? 0.5 * (y0 - y2) / den : 0.0;
-    if (off > 0.5)
-        off = 0.5;
-    if (off < -0.5)
-        off = -0.5;
-    *height = y1 - 0.25 * (y0 - y2) * off;
-    return (double)(b - lags) + off;
 }
 
 /* --- the search ---------------------------------------------------------- */
@@ -1089,7 +1029,7 @@ static int half_peaks_ch(mar_follow *f, int onset, double p, double r, size_t ag
             correlate_ch(f, f->of, f->o1, f->o2, f->rs, k0, len, j0, VERIFY_LAGS, rho);
         else
             correlate(f, f->rs, k0, len, j0, VERIFY_LAGS, rho);
-        hp[half].lag = peak(rho, VERIFY_LAGS, &hp[half].height, &hp[half].kappa, &hp[half].edge);
+        hp[half].lag = mar_corr_peak(rho, VERIFY_LAGS, &hp[half].height, &hp[half].kappa, &hp[half].edge);
         double jmid = (double)j0 + (double)k0 + 0.5 * (double)(len - 1);
         hp[half].ctr = (p - 0.5 - jmid) / r;
     }
@@ -1367,7 +1307,7 @@ static int detect_pause(mar_follow *f, int have)
         return 0;                                     /* only when the position is trusted */
     double db = f->ldb[ring(f, f->t)];
     /* the stored frame this live frame should show: centre of the frame */
-    double stored = stored_db_at(f, f->p - 0.5 * f->r - 0.5);
+    double stored = stored_db_at(f, f->kf.p - 0.5 * f->kf.r - 0.5);
     double expected = stored + f->gain;
     double margin = expected - f->nf;                 /* [dB] over the floor */
     if (margin < AUDIBLE_DB || stored < f->s_level - MUSIC_RANGE_DB) {
@@ -1447,17 +1387,6 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
     }
 }
 
-static void kf_predict(mar_follow *f)
-{
-    double q_r = f->tk.rate_var;
-    /* F = [1 1; 0 1] */
-    double p00 = f->P00 + 2.0 * f->P01 + f->P11 + 1e-6;
-    double p01 = f->P01 + f->P11;
-    double p11 = f->P11 + q_r;
-    f->P00 = p00, f->P01 = p01, f->P11 = p11;
-    f->p += f->r;
-}
-
 /* Smooth tracking measurement; returns 1 if used, sets *quiet. The lags
  * searched cover 3 sigma of the predicted measurement (3 ticks at least,
  * WIDE_LAGS at most): wide after a resume, narrow while following. */
@@ -1475,13 +1404,12 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
     }
     long j0;
     double c;
-    size_t m = resample(f, f->p, f->r, ages, &j0, &c);
+    size_t m = resample(f, f->kf.p, f->kf.r, ages, &j0, &c);
     if (m < min_window / 2) {
         *quiet = 2;
         return 0;
     }
-    double hp0 = f->P00 - c * f->P01, hp1 = f->P01 - c * f->P11;     /* P H' with H = [1, -c] */
-    double var = hp0 - c * hp1;                                       /* H P H' [tick^2] */
+    double var = mar_kf_lag_var(&f->kf, c);                           /* [tick^2] */
     double span = ceil(3.0 * sqrt(var > 0.0 ? var : 0.0));
     int lags = span < TRACK_LAGS ? TRACK_LAGS : span > WIDE_LAGS ? WIDE_LAGS : (int)span;
     double rho[2 * MAX_LAGS + 1], h, kappa;
@@ -1491,7 +1419,7 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
         *quiet = 1;
         return 0;
     }
-    double d = peak(rho, lags, &h, &kappa, &edge);
+    double d = mar_corr_peak(rho, lags, &h, &kappa, &edge);
     f->h_fast += f->tk.h_fast * (h - f->h_fast);
     if (edge || h < f->opt.track_threshold || !(kappa > 0.0))
         return 0;
@@ -1499,24 +1427,18 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
         /* the onset feature places the peak: rises survive a room's colouring */
         double rho2[2 * MAX_LAGS + 1], h2, kappa2;
         int edge2;
-        if (resample_ch(f, f->lo, f->p, f->r, ages, &j0, &c) == m) {      /* 0: no onsets in the window */
+        if (resample_ch(f, f->lo, f->kf.p, f->kf.r, ages, &j0, &c) == m) {      /* 0: no onsets in the window */
             correlate_ch(f, f->of, f->o1, f->o2, f->rs, 0, m, j0, lags, rho2);
-            double d2 = peak(rho2, lags, &h2, &kappa2, &edge2);
+            double d2 = mar_corr_peak(rho2, lags, &h2, &kappa2, &edge2);
             if (!edge2 && kappa2 > 0.0)
                 d = d2, kappa = kappa2;
         }
     }
     double k = kappa / KAPPA_REF;
     double R = f->tk.meas_noise * f->tk.meas_noise / (k < 1.0 ? (k > 0.01 ? k : 0.01) : 1.0);
-    double S = var + R;
-    if (d * d > 9.0 * S + 1.0)                        /* gate: 3 sigma, and at least a tick */
+    if (d * d > 9.0 * (var + R) + 1.0)                /* gate: 3 sigma, and at least a tick */
         return 0;
-    double k0 = hp0 / S, k1 = hp1 / S;
-    f->p += k0 * d;
-    f->r += k1 * d;
-    f->P00 -= k0 * hp0;
-    f->P01 -= k0 * hp1;
-    f->P11 -= k1 * hp1;
+    mar_kf_update(&f->kf, c, d, R);
     f->h_slow += f->tk.h_slow * (h - f->h_slow);
     double qual = (h - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->conf += 0.05 * (qual - f->conf);
@@ -1537,7 +1459,7 @@ static int track_paper(mar_follow *f, int *quiet, int *step, uint32_t *flags)
         return 0;
     long j0;
     double c;
-    size_t m = resample(f, f->p + 1.0, 1.0, ages, &j0, &c);
+    size_t m = resample(f, f->kf.p + 1.0, 1.0, ages, &j0, &c);
     if (m < 8)
         return 0;
     double rho[3];
@@ -1567,26 +1489,26 @@ static int track_paper(mar_follow *f, int *quiet, int *step, uint32_t *flags)
 static void second_opinion(mar_follow *f, size_t ages)
 {
     half_peak hp[2];
-    if (!half_peaks_ch(f, 1, f->p, f->r, ages, hp) || hp[0].edge || hp[1].edge
+    if (!half_peaks_ch(f, 1, f->kf.p, f->kf.r, ages, hp) || hp[0].edge || hp[1].edge
         || hp[0].height < f->opt.track_threshold || hp[1].height < f->opt.track_threshold)
         return;
     double ep, er;
     line_fix(hp, &ep, &er);
-    f->p += 0.5 * ep;
-    f->r = fmax(f->opt.rate_min, fmin(f->opt.rate_max, f->r + 0.5 * er));
+    f->kf.p += 0.5 * ep;
+    f->kf.r = fmax(f->opt.rate_min, fmin(f->opt.rate_max, f->kf.r + 0.5 * er));
 }
 
 static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
 {
-    double old = f->p;
+    double old = f->kf.p;
     int was_following = f->ever && f->state != MAR_FOLLOW_SEARCHING;
-    f->p = e->p;
-    f->r = e->r;
+    f->kf.p = e->p;
+    f->kf.r = e->r;
     if (f->onsets && f->opt.mode == MAR_FOLLOW_SMOOTH)
         second_opinion(f, usable(f, e->since, e->frames));
     if (f->opt.mode == MAR_FOLLOW_PAPER)
-        f->p = floor(f->p + 0.5), f->r = 1.0;
-    kf_init(f, 0.25, 1e-5);
+        f->kf.p = floor(f->kf.p + 0.5), f->kf.r = 1.0;
+    mar_kf_init(&f->kf, 0.25, 1e-5);
     f->seg_start = e->since;
     f->state = MAR_FOLLOW_LOCKED;
     f->ever = f->located = 1;
@@ -1598,8 +1520,8 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->doubt = f->probation = f->regaining = f->unproven = f->cue_pending = 0;
     f->h_slow = f->h_fast = e->fine;
     f->have_gain = 0;
-    update_gain(f, f->p, f->r, f->tk.verify_window);
-    if (!was_following || fabs(old - f->p) > 2.0)
+    update_gain(f, f->kf.p, f->kf.r, f->tk.verify_window);
+    if (!was_following || fabs(old - f->kf.p) > 2.0)
         *flags |= MAR_FOLLOW_F_JUMP;
     f->c.locks++;
     f->near = 0;
@@ -1675,11 +1597,11 @@ static int music_started(mar_follow *f, int have, uint64_t *onset)
 static void play_from_cue(mar_follow *f, uint64_t onset)
 {
     f->cue_onset = f->seg_start = onset;
-    f->p = f->cue_from + (double)(f->t - onset) + 0.5;     /* its middle, on average */
+    f->kf.p = f->cue_from + (double)(f->t - onset) + 0.5;     /* its middle, on average */
     if (f->opt.mode == MAR_FOLLOW_PAPER)
-        f->p = floor(f->p + 0.5);                           /* paper: whole stored samples */
-    f->r = 1.0;
-    kf_init(f, 1.0, 1e-3);
+        f->kf.p = floor(f->kf.p + 0.5);                           /* paper: whole stored samples */
+    f->kf.r = 1.0;
+    mar_kf_init(&f->kf, 1.0, 1e-3);
     f->state = MAR_FOLLOW_HOLDING;
     f->ever = 1;
     f->cue_pending = 1;
@@ -1715,7 +1637,7 @@ static double line_fit_ch(mar_follow *f, int onset, size_t ages, double *best_r,
             continue;
         if (correlate_ch(f, sfeat, q1, q2, f->rs, 0, m, j0, CUE_LAGS, rho) < f->opt.quiet_db)
             continue;                                           /* flat: no evidence */
-        double d = peak(rho, CUE_LAGS, &h, &kappa, &edge);
+        double d = mar_corr_peak(rho, CUE_LAGS, &h, &kappa, &edge);
         if (isnan(best))
             best = -1.0;                                        /* evidence, no fit yet */
         if (!edge && h > best)
@@ -1799,10 +1721,10 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
     if (f->opt.mode == MAR_FOLLOW_PAPER)           /* paper: whole samples, one per tick */
         line_now = floor(line_now + 0.5), best_r = 1.0;
     if (confirmed) {
-        f->p = line_now;
-        f->r = best_r;
+        f->kf.p = line_now;
+        f->kf.r = best_r;
         double rate_sd = 1.0 / (double)ages;                    /* a tick over the fit [1] */
-        kf_init(f, 0.25, rate_sd * rate_sd);
+        mar_kf_init(&f->kf, 0.25, rate_sd * rate_sd);
         f->cue_pending = 0;
         f->located = f->measured = 1;
         f->state = MAR_FOLLOW_LOCKED;
@@ -1817,9 +1739,9 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
          * better than the tracker's first short windows (their rate runs
          * away in sustained music); the place stays unproven. A flat peak
          * (slow pads) leaves the rate open: the tracker keeps it */
-        f->p = line_now;
-        f->r = best_r;
-        kf_init(f, 1.0, 4.0 / ((double)ages * (double)ages));  /* a tick over the fit, twice [1] */
+        f->kf.p = line_now;
+        f->kf.r = best_r;
+        mar_kf_init(&f->kf, 1.0, 4.0 / ((double)ages * (double)ages));  /* a tick over the fit, twice [1] */
     } else if (f->cue_fits == CUE_REFUTE_FIT + 1 && best < f->opt.track_threshold) {   /* NaN: flat, not refuted */
         f->cue_pending = 0;                                     /* refuted */
         f->state = MAR_FOLLOW_SEARCHING;
@@ -1877,7 +1799,7 @@ static double near_peak(mar_follow *f, double centre, double *h_out)
     int edge;
     if (correlate(f, f->rs, 0, m, j0, NEAR_LAGS, rho) < f->opt.quiet_db)
         return NAN;
-    double d = peak(rho, NEAR_LAGS, &h, &kappa, &edge);
+    double d = mar_corr_peak(rho, NEAR_LAGS, &h, &kappa, &edge);
     *h_out = h;
     double lead = lock_lead(f, m);
     if (edge || !lockable_peak(f, h, kappa) || fisher(h) - fisher(best_rival(rho, NEAR_LAGS, d)) < lead)
@@ -1994,8 +1916,8 @@ static void run_search(mar_follow *f, uint32_t *flags)
             tr->since = f->seg_start;
             tr->checked = f->t;
         }
-        tr->p = f->p;
-        tr->r = f->r > 0.0 ? f->r : 1.0;
+        tr->p = f->kf.p;
+        tr->r = f->kf.r > 0.0 ? f->kf.r : 1.0;
     } else if (tr) {
         tr->used = 0;
     }
@@ -2045,7 +1967,7 @@ static uint64_t stop_step(const mar_follow *f, uint64_t oldest)
         uint64_t q = lo_step + i;
         double db = f->ldb[ring(f, q)], m = 0.0, h = 0.0;
         if (!isnan(db)) {
-            double music = stored_db_at(f, f->lpos[ring(f, q)] - 0.5 * f->r - 0.5) + f->gain;
+            double music = stored_db_at(f, f->lpos[ring(f, q)] - 0.5 * f->kf.r - 0.5) + f->gain;
             double expected = 10.0 * log10(pow(10.0, 0.1 * music) + pow(10.0, 0.1 * hiss));
             m = fmin(cap, (db - expected) * (db - expected));
             h = fmin(cap, (db - hiss) * (db - hiss));
@@ -2072,12 +1994,12 @@ static void pause_now(mar_follow *f)
     if (oldest < f->seg_start)
         oldest = f->seg_start;
     uint64_t stop = stop_step(f, oldest);             /* first silent step */
-    double at = f->p;
+    double at = f->kf.p;
     if (stop >= 1 && stop - 1 >= oldest && f->t - stop < f->hcap - 1)
         at = f->lpos[ring(f, stop - 1)];
-    f->frozen = at - 0.5 * f->r;
+    f->frozen = at - 0.5 * f->kf.r;
     f->stop_at = stop >= oldest && stop <= f->t ? stop : f->t;
-    f->p = f->frozen;
+    f->kf.p = f->frozen;
     f->state = MAR_FOLLOW_PAUSED;
     f->unproven = 0;
     f->loud_run = 0;
@@ -2116,7 +2038,7 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
     if (f->loud_run < 2)
         return 0;
     if (f->opt.mode == MAR_FOLLOW_PAPER)
-        f->r = 1.0;
+        f->kf.r = 1.0;
     /* the music began where the frames first rose clearly over the silence
      * (a quiet entry rises slowly): look back from the run */
     uint64_t onset = f->t + 1 - f->loud_run, limit = f->t > f->tk.onset_back ? f->t - f->tk.onset_back : 0;
@@ -2145,7 +2067,7 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
             }
         }
     }
-    f->p = from + f->r * (run - 0.5);
+    f->kf.p = from + f->kf.r * (run - 0.5);
     f->seg_start = onset;
     f->probation = 1;
     f->probation_ok = 0;
@@ -2156,10 +2078,10 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
     f->last_good = f->t;
     f->bad_since = f->quiet_since = 0;
     f->silent_run = 0;
-    kf_init(f, RESUME_VAR, f->P11 + 1e-6);
-    start_near(f, f->p, f->r, onset);
-    if (f->r > 0.0)               /* had the tape not stopped (a fade read as a stop) */
-        f->alt_p = f->frozen + f->r * (double)(f->t + 1 - f->stop_at);
+    mar_kf_init(&f->kf, RESUME_VAR, f->kf.P11 + 1e-6);
+    start_near(f, f->kf.p, f->kf.r, onset);
+    if (f->kf.r > 0.0)               /* had the tape not stopped (a fade read as a stop) */
+        f->alt_p = f->frozen + f->kf.r * (double)(f->t + 1 - f->stop_at);
     f->c.resumes++;
     *flags |= MAR_FOLLOW_F_JUMP;
     return 1;
@@ -2187,14 +2109,14 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
     if (f->opt.mode == MAR_FOLLOW_PAPER) {
         int step;
         ok = track_paper(f, &quiet, &step, flags);
-        f->p += (double)step;
-        f->r = (double)step;
+        f->kf.p += (double)step;
+        f->kf.r = (double)step;
     } else {
         ok = track_smooth(f, &quiet, flags);
     }
     /* the volume knob turns whether or not the correlation is clear (a ramp
      * in a quiet passage would otherwise look like a pause) */
-    update_gain(f, f->p, f->r > 0.0 ? f->r : 1.0, 1);
+    update_gain(f, f->kf.p, f->kf.r > 0.0 ? f->kf.r : 1.0, 1);
     if (ok) {
         f->measured = 1;
         f->probation_ok++;
@@ -2294,11 +2216,11 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
     } else if (f->state == MAR_FOLLOW_PAUSED)
         resumed = resume_now(f, have, &flags);
     else if (f->state == MAR_FOLLOW_SEARCHING)
-        f->p += f->ever ? f->r : 0.0;                 /* flywheel, or nothing known yet */
+        f->kf.p += f->ever ? f->kf.r : 0.0;                 /* flywheel, or nothing known yet */
     else if (f->opt.mode == MAR_FOLLOW_PAPER)
         ;                                             /* paper: the tracking step moves it */
     else
-        kf_predict(f);
+        mar_kf_predict(&f->kf, f->tk.rate_var);
 
     /* 2. following: pause, else measure */
     if (f->state == MAR_FOLLOW_LOCKED || f->state == MAR_FOLLOW_HOLDING) {
@@ -2333,27 +2255,27 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
     if (f->state == MAR_FOLLOW_SEARCHING) {
         f->conf = 0.0;
         if (!f->ever)
-            f->r = 0.0;
+            f->kf.r = 0.0;
     }
 
     /* 4. limits */
     int still = f->state == MAR_FOLLOW_PAUSED || f->state == MAR_FOLLOW_WAITING;
     if (f->opt.mode == MAR_FOLLOW_SMOOTH && !still && f->ever) {
-        if (f->r < f->opt.rate_min)
-            f->r = f->opt.rate_min, flags |= MAR_FOLLOW_F_RATE_LIMIT;
-        if (f->r > f->opt.rate_max)
-            f->r = f->opt.rate_max, flags |= MAR_FOLLOW_F_RATE_LIMIT;
+        if (f->kf.r < f->opt.rate_min)
+            f->kf.r = f->opt.rate_min, flags |= MAR_FOLLOW_F_RATE_LIMIT;
+        if (f->kf.r > f->opt.rate_max)
+            f->kf.r = f->opt.rate_max, flags |= MAR_FOLLOW_F_RATE_LIMIT;
     }
-    if (f->p < 0.0)
-        f->p = 0.0;
-    if (f->p >= (double)f->n) {
-        f->p = (double)f->n;
+    if (f->kf.p < 0.0)
+        f->kf.p = 0.0;
+    if (f->kf.p >= (double)f->n) {
+        f->kf.p = (double)f->n;
         flags |= MAR_FOLLOW_F_END;
     }
-    f->lpos[ring(f, f->t)] = f->p;
+    f->lpos[ring(f, f->t)] = f->kf.p;
 
-    double rate = still ? 0.0 : f->r;
-    double ahead = f->p + rate * f->tk.latency;
+    double rate = still ? 0.0 : f->kf.r;
+    double ahead = f->kf.p + rate * f->tk.latency;
     out->position = ahead > (double)f->n ? (double)f->n : ahead;
     out->rate = rate;
     out->confidence = f->conf < 0.0 ? 0.0 : f->conf > 1.0 ? 1.0 : f->conf;

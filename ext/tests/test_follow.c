@@ -1,4 +1,5 @@
-/* Standalone C test of the music follower (mar_follow.c). Built by
+/* Standalone C test of the music follower (mar_follow*.c: the follower,
+ * its correlation at lags and its Kalman filter, each on its own first). Built by
  * tests/test_follow.py with -Wall -Wextra -Wpedantic -Werror under
  * AddressSanitizer and UBSan, and linked with --wrap=malloc (and calloc,
  * realloc, free) to prove that no step allocates. */
@@ -9,6 +10,8 @@
 #include <string.h>
 
 #include "mar_follow.h"
+#include "mar_follow_corr.h"
+#include "mar_follow_kf.h"
 
 #include "mar_test.h"
 
@@ -207,8 +210,157 @@ static void test_follows(void)
     mar_follow_destroy(f);
 }
 
+static double gauss(void)
+{
+    double u = uniform(1e-12, 1.0), v = uniform(0.0, 1.0);
+    return sqrt(-2.0 * log(u)) * cos(6.283185307179586 * v);
+}
+
+/* mar_corr_lags against Pearson's formula computed directly (two passes,
+ * both means removed), on random windows and lags; a scaled and shifted
+ * copy of the stored music correlates 1 at its own lag. */
+static void test_corr_lags(int cases)
+{
+    enum { CAP = 400, MAXL = 12 };
+    static double stored[CAP + 2 * MAXL + 8], q1[CAP + 2 * MAXL + 9], q2[CAP + 2 * MAXL + 9], live[CAP];
+    double rho[2 * MAXL + 1];
+    for (int c = 0; c < cases; c++) {
+        size_t len = (size_t)uniform(4.0, (double)CAP);
+        int lags = (int)uniform(0.0, (double)MAXL + 1.0);
+        size_t n = len + 2 * (size_t)lags + 8;
+        for (size_t i = 0; i < n; i++)
+            stored[i] = uniform(-40.0, 0.0);
+        q1[0] = q2[0] = 0.0;
+        for (size_t i = 0; i < n; i++)
+            q1[i + 1] = q1[i] + stored[i], q2[i + 1] = q2[i] + stored[i] * stored[i];
+        long at = lags + (long)uniform(0.0, 8.0);
+        int d0 = lags ? (int)uniform(-(double)lags, (double)lags + 1.0) : 0;
+        int copy = c % 3 == 0;                      /* every third: a copy of the stored music at lag d0 */
+        double gain = uniform(0.5, 2.0), shift = uniform(-10.0, 10.0);
+        for (size_t k = 0; k < len; k++)
+            live[k] = copy ? gain * stored[(size_t)(at + d0) + k] + shift : uniform(-40.0, 0.0);
+        double spread = mar_corr_lags(live, len, stored, q1, q2, at, lags, rho);
+        double lm = 0.0, ll = 0.0;
+        for (size_t k = 0; k < len; k++)
+            lm += live[k];
+        lm /= (double)len;
+        for (size_t k = 0; k < len; k++)
+            ll += (live[k] - lm) * (live[k] - lm);
+        CHECK(fabs(spread - sqrt(ll / (double)len)) < 1e-9, "case %d: spread %g", c, spread);
+        for (int d = -lags; d <= lags; d++) {
+            const double *st = stored + at + d;
+            double sm = 0.0, cov = 0.0, ss = 0.0;
+            for (size_t k = 0; k < len; k++)
+                sm += st[k];
+            sm /= (double)len;
+            for (size_t k = 0; k < len; k++)
+                cov += (live[k] - lm) * (st[k] - sm), ss += (st[k] - sm) * (st[k] - sm);
+            double want = cov / sqrt(ll * ss);
+            CHECK(fabs(rho[d + lags] - want) < 1e-9, "case %d lag %d: rho %.12f, Pearson %.12f",
+                  c, d, rho[d + lags], want);
+        }
+        if (copy)
+            CHECK(fabs(rho[d0 + lags] - 1.0) < 1e-9, "case %d: the copy correlates %.12f at its lag",
+                  c, rho[d0 + lags]);
+    }
+    /* a flat window correlates 0, not NaN */
+    for (size_t k = 0; k < 50; k++)
+        live[k] = -20.0;
+    mar_corr_lags(live, 50, stored, q1, q2, 5, 3, rho);
+    for (int i = 0; i < 7; i++)
+        CHECK(rho[i] == 0.0, "flat live window: rho[%d] = %g", i, rho[i]);
+}
+
+/* mar_corr_peak finds the top of a sampled parabola exactly, its height
+ * and curvature; a maximum at either end is an edge. */
+static void test_corr_peak(int cases)
+{
+    double rho[2 * 12 + 1];
+    for (int c = 0; c < cases; c++) {
+        int lags = (int)uniform(1.0, 13.0);
+        double top = uniform((double)(-lags) + 0.6, (double)lags - 0.6);   /* inside, off the ends */
+        double h = uniform(0.2, 1.0), k = uniform(0.01, 0.5);
+        for (int i = 0; i <= 2 * lags; i++) {
+            double x = (double)(i - lags) - top;
+            rho[i] = h - 0.5 * k * x * x;
+        }
+        double height, kappa;
+        int edge;
+        double lag = mar_corr_peak(rho, lags, &height, &kappa, &edge);
+        CHECK(!edge && fabs(lag - top) < 1e-9 && fabs(height - h) < 1e-9 && fabs(kappa - k) < 1e-9,
+              "case %d: peak at %g (want %g), height %g (%g), kappa %g (%g), edge %d",
+              c, lag, top, height, h, kappa, k, edge);
+        for (int i = 0; i <= 2 * lags; i++)
+            rho[i] = (double)i;                     /* rising to the last lag: no peak */
+        lag = mar_corr_peak(rho, lags, &height, &kappa, &edge);
+        CHECK(edge && lag == (double)lags && kappa == 0.0, "case %d: edge not seen", c);
+    }
+}
+
+/* mar_kf against the matrix formulas written out, and the filter honest
+ * about its own error: over many runs of its own model, the normalised
+ * estimation error squared averages 2 (two states). */
+static void test_kf(int cases)
+{
+    for (int c = 0; c < cases; c++) {
+        mar_kf kf = {.p = uniform(0.0, 1000.0), .r = uniform(0.9, 1.1)};
+        mar_kf_init(&kf, uniform(0.01, 10.0), uniform(1e-8, 1e-3));
+        double q_r = uniform(0.0, 1e-6), cc = uniform(0.0, 200.0), d = uniform(-3.0, 3.0), R = uniform(0.01, 4.0);
+        /* predict: P = F P F' + Q, F = [1 1; 0 1] */
+        double P[2][2] = {{kf.P00, kf.P01}, {kf.P01, kf.P11}}, x0 = kf.p + kf.r, x1 = kf.r;
+        double FP[2][2] = {{P[0][0] + P[1][0], P[0][1] + P[1][1]}, {P[1][0], P[1][1]}};
+        double Pp[2][2] = {{FP[0][0] + FP[0][1] + MAR_KF_Q_P, FP[0][1]}, {FP[1][0] + FP[1][1], FP[1][1] + q_r}};
+        mar_kf_predict(&kf, q_r);
+        CHECK(fabs(kf.P00 - Pp[0][0]) < 1e-9 * (1 + Pp[0][0]) && fabs(kf.P01 - Pp[0][1]) < 1e-9 * (1 + fabs(Pp[0][1]))
+              && fabs(kf.P11 - Pp[1][1]) < 1e-12 && kf.p == x0 && kf.r == x1, "case %d: predict", c);
+        /* update: K = P H' / (H P H' + R), x += K d, P = (I - K H) P, H = [1, -cc] */
+        double PH[2] = {Pp[0][0] - cc * Pp[0][1], Pp[1][0] - cc * Pp[1][1]};
+        double S = PH[0] - cc * PH[1];
+        CHECK(fabs(mar_kf_lag_var(&kf, cc) - S) < 1e-9 * (1 + fabs(S)), "case %d: lag variance", c);
+        S += R;
+        double K[2] = {PH[0] / S, PH[1] / S};
+        double want_p = x0 + K[0] * d, want_r = x1 + K[1] * d;
+        double Pu00 = Pp[0][0] - K[0] * PH[0], Pu01 = Pp[0][1] - K[0] * PH[1], Pu11 = Pp[1][1] - K[1] * PH[1];
+        mar_kf_update(&kf, cc, d, R);
+        CHECK(fabs(kf.p - want_p) < 1e-9 * (1 + fabs(want_p)) && fabs(kf.r - want_r) < 1e-12
+              && fabs(kf.P00 - Pu00) < 1e-9 * (1 + Pu00) && fabs(kf.P01 - Pu01) < 1e-9 * (1 + fabs(Pu01))
+              && fabs(kf.P11 - Pu11) < 1e-12, "case %d: update", c);
+        CHECK(kf.P00 > 0.0 && kf.P11 > 0.0 && kf.P00 * kf.P11 - kf.P01 * kf.P01 > 0.0,
+              "case %d: the covariance is not positive definite", c);
+    }
+    /* NEES: the truth moves by the filter's own model; a measurement every
+     * other tick over a window centred c ticks back */
+    double nees = 0.0;
+    long count = 0;
+    const double q_r = 1e-7, R = 0.25, cc = 40.0;
+    for (int run = 0; run < 200; run++) {
+        double tp = 0.0, tr = uniform(0.95, 1.05);
+        mar_kf kf = {.p = tp + 2.0 * gauss(), .r = 1.0 + 0.03 * gauss()};
+        mar_kf_init(&kf, 4.0, 9e-4);
+        for (int k = 1; k <= 400; k++) {
+            tp += tr + sqrt(MAR_KF_Q_P) * gauss();
+            tr += sqrt(q_r) * gauss();
+            mar_kf_predict(&kf, q_r);
+            if (k % 2 == 0) {
+                double z = (tp - cc * tr) - (kf.p - cc * kf.r) + sqrt(R) * gauss();
+                mar_kf_update(&kf, cc, z, R);
+            }
+            if (k > 100) {
+                double ep = tp - kf.p, er = tr - kf.r, det = kf.P00 * kf.P11 - kf.P01 * kf.P01;
+                nees += (kf.P11 * ep * ep - 2.0 * kf.P01 * ep * er + kf.P00 * er * er) / det;
+                count++;
+            }
+        }
+    }
+    nees /= (double)count;
+    CHECK(nees > 1.7 && nees < 2.3, "NEES %.3f, a consistent filter gives 2", nees);
+}
+
 int main(void)
 {
+    test_corr_lags(300);
+    test_corr_peak(300);
+    test_kf(300);
     test_bad_options();
     test_random_inputs(12);
     test_follows();
