@@ -718,54 +718,15 @@ void mar_follow_cue(mar_follow *f, double position)
 
 /* --- correlation along a line ------------------------------------------ */
 
-/* Resamples the live history along the line (p, r) onto whole stored frames
- * j0 .. j0 + m - 1, using live ages below `ages`. Missing frames take the
- * mean (they add nothing to the covariance). Returns m (0 if too few live
- * frames); *center: mean (age + 0.5) of the samples [ticks]. */
+/* The live history resampled along the line (p, r) onto whole stored
+ * frames (mar_corr_resample), inside the padded piece with room for the
+ * widest lags. */
 static size_t resample_ch(mar_follow *f, const double *ring_buf, double p, double r, size_t ages, long *j0,
                           double *center)
 {
-    if (ages < 2 || !(r > 0.0))
-        return 0;
-    double xa = p - r * ((double)(ages - 1) + 0.5) - 0.5;     /* oldest frame's stored index */
-    double xb = p - r * 0.5 - 0.5;                             /* newest */
-    long ja = (long)ceil(xa), jb = (long)floor(xb);
-    if (jb < ja)
-        return 0;
-    size_t m = (size_t)(jb - ja + 1);
-    if (m > f->scap)
-        m = f->scap, ja = jb - (long)m + 1;
-    if (ja < -f->pad + MAX_LAGS + 1 || jb > (long)f->n + f->pad - MAX_LAGS - 2)
-        return 0;                                             /* outside the padded piece */
-    double sum = 0.0, csum = 0.0;
-    size_t valid = 0;
-    for (size_t k = 0; k < m; k++) {
-        double a = (p - 0.5 - (double)(ja + (long)k)) / r - 0.5;   /* live age of this stored frame */
-        if (a < 0.0)
-            a = 0.0;
-        size_t i0 = (size_t)a;
-        double fr = a - (double)i0;
-        double v0 = ring_buf[ring(f, f->t - i0)];
-        double v = v0;
-        if (fr > 0.0 && i0 + 1 < ages) {
-            double v1 = ring_buf[ring(f, f->t - (i0 + 1))];
-            v = v0 + fr * (v1 - v0);
-        }
-        f->rs[k] = v;
-        if (!isnan(v)) {
-            sum += v;
-            csum += a + 0.5;
-            valid++;
-        }
-    }
-    if (valid < 2)
-        return 0;
-    double mean = sum / (double)valid;
-    for (size_t k = 0; k < m; k++)
-        f->rs[k] = isnan(f->rs[k]) ? 0.0 : f->rs[k] - mean;
-    *j0 = ja;
-    *center = csum / (double)valid;
-    return m;
+    const mar_corr_history live = {ring_buf, f->hmask, f->t};
+    return mar_corr_resample(&live, ages, p, r, -f->pad + MAX_LAGS + 1, (long)f->n + f->pad - MAX_LAGS - 2,
+                             f->scap, f->rs, j0, center);
 }
 
 static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0, double *center)

@@ -1,7 +1,53 @@
-/* Correlation at lags and its peak (mar_follow_corr.h). */
+/* Correlation along a line (mar_follow_corr.h). */
 #include "mar_follow_corr.h"
 
 #include <math.h>
+
+size_t mar_corr_resample(const mar_corr_history *live, size_t ages, double p, double r, long lo, long hi,
+                         size_t cap, double *out, long *j0, double *center)
+{
+    if (ages < 2 || !(r > 0.0))
+        return 0;
+    double xa = p - r * ((double)(ages - 1) + 0.5) - 0.5;     /* oldest frame's stored index */
+    double xb = p - r * 0.5 - 0.5;                             /* newest */
+    long ja = (long)ceil(xa), jb = (long)floor(xb);
+    if (jb < ja)
+        return 0;
+    size_t m = (size_t)(jb - ja + 1);
+    if (m > cap)
+        m = cap, ja = jb - (long)m + 1;
+    if (ja < lo || jb > hi)
+        return 0;
+    double sum = 0.0, csum = 0.0;
+    size_t valid = 0;
+    for (size_t k = 0; k < m; k++) {
+        double a = (p - 0.5 - (double)(ja + (long)k)) / r - 0.5;   /* live age of this stored frame */
+        if (a < 0.0)
+            a = 0.0;
+        size_t i0 = (size_t)a;
+        double fr = a - (double)i0;
+        double v0 = live->v[(live->t - i0) & live->mask];
+        double v = v0;
+        if (fr > 0.0 && i0 + 1 < ages) {
+            double v1 = live->v[(live->t - (i0 + 1)) & live->mask];
+            v = v0 + fr * (v1 - v0);
+        }
+        out[k] = v;
+        if (!isnan(v)) {
+            sum += v;
+            csum += a + 0.5;
+            valid++;
+        }
+    }
+    if (valid < 2)
+        return 0;
+    double mean = sum / (double)valid;
+    for (size_t k = 0; k < m; k++)
+        out[k] = isnan(out[k]) ? 0.0 : out[k] - mean;
+    *j0 = ja;
+    *center = csum / (double)valid;
+    return m;
+}
 
 double mar_corr_lags(const double *live, size_t len, const double *stored, const double *q1,
                      const double *q2, long at, int lags, double *rho)

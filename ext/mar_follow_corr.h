@@ -1,7 +1,14 @@
-/* Correlation of a live window against the stored music at whole-frame
- * lags, and the peak of those correlations: what every measurement of the
- * follower (tracking, verification, the cue's fits, the near search) is
- * made of.
+/* Correlation along a line: the live history resampled onto the stored
+ * frames a hypothesis (position p, rate r) says it played, correlated with
+ * the stored music at whole-frame lags around it, and the peak of those
+ * correlations. What every measurement of the follower (tracking,
+ * verification, the cue's fits, the near search) is made of.
+ *
+ * The line. "The live music is at stored position p now and moves at rate
+ * r" maps the live frame of age i (0 = newest, covering live time [now - i
+ * - 1, now - i) [ticks]) to the stored index x(i) = p - r (i + 0.5) - 0.5
+ * (stored frame j covers [j, j + 1)). A peak at lag d means the line is d
+ * ticks behind where the music says.
  *
  * The stored side comes with its prefix sums (q1[i] = sum of stored[0 ..
  * i), q2 the same of squares), so each lag costs one dot product: the
@@ -12,6 +19,24 @@
 #define MAR_FOLLOW_CORR_H
 
 #include <stddef.h>
+#include <stdint.h>
+
+/* The live history as a ring: v[step & mask] is the frame of that step
+ * (NaN: none came), t the newest step. */
+typedef struct {
+    const double *v;
+    size_t mask;                /* ring size - 1 (a power of 2) */
+    uint64_t t;                 /* newest step */
+} mar_corr_history;
+
+/* The live frames of ages 0 .. ages - 1 resampled along the line (p, r)
+ * onto whole stored frames j0 .. j0 + m - 1 (linear between live frames),
+ * at most cap, the newest kept; into out, mean removed, missing frames at
+ * the mean (they add nothing to a covariance). Returns m, 0 when fewer
+ * than 2 values or the frames would leave [lo, hi]; *center: the mean
+ * (age + 0.5) of the samples [ticks], the window's centre in the past. */
+size_t mar_corr_resample(const mar_corr_history *live, size_t ages, double p, double r, long lo, long hi,
+                         size_t cap, double *out, long *j0, double *center);
 
 /* Pearson correlation of live[0 .. len) with stored[at + d .. at + d +
  * len), for d = -lags .. lags, into rho[d + lags] (0 where either side is

@@ -271,6 +271,58 @@ static void test_corr_lags(int cases)
         CHECK(rho[i] == 0.0, "flat live window: rho[%d] = %g", i, rho[i]);
 }
 
+/* Correlation along a line: live frames are smooth stored music played at
+ * rate r from p0 (one in 20 missing); resampled along a line d ticks
+ * behind the true one, they correlate with the stored music at lag d
+ * within 0.2 tick, above 0.8 (missing frames and two linear
+ * interpolations of 8-tick waves cost the rest). */
+static void test_corr_along_a_line(int cases)
+{
+    enum { N = 4000, CAP = 1024, LAGS = 6 };
+    static double stored[N], q1[N + 1], q2[N + 1], ring[CAP], out[CAP];
+    double rho[2 * LAGS + 1];
+    for (int c = 0; c < cases; c++) {
+        double ph[3] = {uniform(0, 6.3), uniform(0, 6.3), uniform(0, 6.3)};
+        double per[3] = {uniform(8, 20), uniform(20, 45), uniform(45, 120)};      /* [ticks] */
+        for (size_t j = 0; j < N; j++)
+            stored[j] = -20.0 + 6.0 * sin(6.283185307179586 * (double)j / per[0] + ph[0])
+                        + 4.0 * sin(6.283185307179586 * (double)j / per[1] + ph[1])
+                        + 3.0 * sin(6.283185307179586 * (double)j / per[2] + ph[2]);
+        q1[0] = q2[0] = 0.0;
+        for (size_t j = 0; j < N; j++)
+            q1[j + 1] = q1[j] + stored[j], q2[j + 1] = q2[j] + stored[j] * stored[j];
+        double r = uniform(0.9, 1.1), p0 = uniform(100.0, 1500.0);
+        uint64_t t = (uint64_t)uniform(CAP, 2000.0);                               /* newest step */
+        for (uint64_t k = t + 1 - CAP; k <= t; k++)
+            ring[k & (CAP - 1)] = uniform(0.0, 1.0) < 0.05 ? NAN : live_at(stored, N, p0, r, (size_t)k);
+        double p = p0 + r * (double)(t + 1);                  /* where the music is now [stored ticks] */
+        size_t ages = (size_t)uniform(100.0, 900.0);
+        double behind = uniform(-2.5, 2.5);                    /* the line's error [ticks] */
+        const mar_corr_history live = {ring, CAP - 1, t};
+        long j0;
+        double center;
+        size_t m = mar_corr_resample(&live, ages, p - behind, r, LAGS, N - LAGS - 1, CAP, out, &j0, &center);
+        CHECK(m > 0 && fabs((double)m - (double)ages * r) < 2.0, "case %d: %zu samples for %zu frames", c, m, ages);
+        CHECK(fabs(center - 0.5 * (double)ages) < 0.05 * (double)ages + 1.0, "case %d: centre %g of %zu frames",
+              c, center, ages);
+        if (!m)
+            continue;
+        mar_corr_lags(out, m, stored, q1, q2, j0, LAGS, rho);
+        double height, kappa;
+        int edge;
+        double lag = mar_corr_peak(rho, LAGS, &height, &kappa, &edge);
+        CHECK(!edge && fabs(lag - behind) < 0.2 && height > 0.8,
+              "case %d: line %.2f ticks behind, peak at %.3f (height %.3f)", c, behind, lag, height);
+    }
+    /* too few frames, a standing line, or a line out of the piece: nothing */
+    const mar_corr_history live = {ring, CAP - 1, 2000};
+    long j0;
+    double center;
+    CHECK(mar_corr_resample(&live, 1, 500.0, 1.0, 0, N, CAP, out, &j0, &center) == 0, "one frame resampled");
+    CHECK(mar_corr_resample(&live, 100, 500.0, 0.0, 0, N, CAP, out, &j0, &center) == 0, "rate 0 resampled");
+    CHECK(mar_corr_resample(&live, 100, 50.0, 1.0, 0, N, CAP, out, &j0, &center) == 0, "line out of the piece");
+}
+
 /* mar_corr_peak finds the top of a sampled parabola exactly, its height
  * and curvature; a maximum at either end is an edge. */
 static void test_corr_peak(int cases)
@@ -358,12 +410,13 @@ static void test_kf(int cases)
 
 int main(void)
 {
-    test_corr_lags(300);
-    test_corr_peak(300);
-    test_kf(300);
     test_bad_options();
     test_random_inputs(12);
     test_follows();
+    test_corr_lags(300);
+    test_corr_along_a_line(200);
+    test_corr_peak(300);
+    test_kf(300);
     if (failures) {
         fprintf(stderr, "%d checks failed\n", failures);
         return 1;
