@@ -31,6 +31,10 @@ def register(sub) -> None:
                                    "CLOCK_MONOTONIC of model time 0), tick, the simulated "
                                    "positions [unit] and their model time (whole 1 ms steps) "
                                    "to this .npz")
+    p.add_argument("--no-accel-clip", action="store_true",
+                   help="drives that do not clip acceleration (only speed and position limits), "
+                        "so that a command stream asking too much shows in the summary's "
+                        "peak_accel [unit/s^2, from positions sampled once per tick]")
     p.add_argument("--music", help="a node measures this recording's loudness, played from the "
                                    "start of the run, and reports it in LOUDNESS messages")
     p.add_argument("--loudness-node", type=int, help="the node that does (default: the figure's last)")
@@ -61,7 +65,8 @@ def cmd_sim(args) -> int:
         music = read_wav(args.music)
     node = args.loudness_node if args.loudness_node is not None else max(a.node for a in config.axes)
     figure = SimFigure(config, faults, args.watchdog_ticks or DEFAULT_WATCHDOG_TICKS,
-                       trace=bool(args.trace), music=music, music_node=node)
+                       trace=bool(args.trace), music=music, music_node=node,
+                       clip_accel=not args.no_accel_clip)
     if args.can == "slcan":
         front = SlcanFrontEnd()
     elif args.can == "udp_multicast":

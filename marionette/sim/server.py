@@ -178,7 +178,8 @@ def run(figure: SimFigure, front, faults: Faults, seconds: float | None = None,
         pass
     summary = {"messages": figure.messages, "link": front.counters(),
                "bytes_dropped": faults.bytes_dropped, "bytes_corrupted": faults.bytes_corrupted,
-               "nodes": {n: vars(s.counters) for n, s in figure.nodes.items()}}
+               "nodes": {n: vars(s.counters) for n, s in figure.nodes.items()},
+               "peak_accel": dict(zip(figure.config.axis_names, figure.peak_accel().tolist()))}
     if trace_path:
         np.savez(trace_path, t0=t0, **figure.trace_arrays())
     front.close()
