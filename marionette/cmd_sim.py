@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import sys
 
 from marionette.config import load_config
@@ -44,6 +45,19 @@ def register(sub) -> None:
     p.set_defaults(run=cmd_sim)
 
 
+def control_stdin(stdin) -> bool:
+    """Whether stdin may carry control lines: a pipe, or a terminal (read
+    only while the simulator is in its foreground: server.run checks again
+    before each read). Otherwise (`marionette sim --serial &` from a shell,
+    /dev/null, a file) it is left alone, so a background run is never
+    stopped for reading its terminal."""
+    try:
+        mode = os.fstat(stdin.fileno()).st_mode
+    except (AttributeError, OSError, ValueError):
+        return False
+    return stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode) or stdin.isatty()
+
+
 def cmd_sim(args) -> int:
     from marionette.sim.faults import Faults
     from marionette.sim.figure import SimFigure
@@ -74,6 +88,6 @@ def cmd_sim(args) -> int:
     else:
         front = SerialFrontEnd()
     summary = run(figure, front, faults, seconds=args.seconds, trace_path=args.trace,
-                  control=sys.stdin)
+                  control=sys.stdin if control_stdin(sys.stdin) else None)
     print(json.dumps({"summary": summary}), flush=True)
     return 0

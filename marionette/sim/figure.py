@@ -57,6 +57,11 @@ class SimFigure:
         configuration order (ServoModel.peak_accel)."""
         return np.array([self.nodes[n].model.peak_accel[j] for n, j in self._where])
 
+    @property
+    def time(self) -> float:
+        """Model time the drives have run to [s]."""
+        return min(node.model.time for node in self.nodes.values())
+
     def advance_to(self, t: float) -> None:
         for node in self.nodes.values():
             node.advance_to(t)
