@@ -272,6 +272,6 @@ def test_a_normal_end_comes_to_rest_and_trips_no_watchdog(sim, figure, tmp_path)
         assert {n: c["watchdog_trips"] for n, c in summary["nodes"].items()} == \
                {n: trips for n in summary["nodes"]}, (end, shown.name, summary["nodes"])
         assert all(c["ignored_estop"] == 0 for c in summary["nodes"].values())
-        limit = np.array([a.max_accel for a in figure.axes])
-        peak = np.array([summary["peak_accel"][a.name] for a in figure.axes])
-        assert np.all(peak <= limit * 1.02), (end, shown.name, peak / limit)
+        # (no check of peak_accel here: in real time the setpoints' arrival
+        # jitter on a loaded machine alone moves it; tests/sim/test_stops.py
+        # checks it on a virtual clock)
