@@ -102,7 +102,8 @@ def cmd_play(args) -> int:
         config = replace(config, follow=replace(config.follow, latency=latency))
         with Engine(config, show, lead=args.lead, interpolation=args.interpolation,
                     output=output, record=args.record or True, rate=args.rate,
-                    follow=follow, follow_start=args.start) as engine:
+                    follow=follow, follow_start=args.start,
+                    end=None if args.end == "none" else args.end) as engine:
             engine_box.append(engine)
             if audio is not None and audio.lost_reason is not None:     # lost before the engine was made
                 engine.source_lost(audio.lost_reason)
@@ -238,7 +239,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--interpolation", choices=sorted(INTERPOLATIONS), default="cubic")
     p.add_argument("--priority", type=int, default=80, help="SCHED_FIFO priority (0: normal)")
     p.add_argument("--cpu", type=int, help="pin the real-time thread to this CPU")
-    p.add_argument("--lock-memory", action="store_true", help="mlockall before starting")
+    p.add_argument("--lock-memory", action=argparse.BooleanOptionalAction, default=True,
+                   help="mlockall before starting the real-time loop (default; a warning, "
+                        "not a failure, when not permitted)")
+    p.add_argument("--end", choices=("hold", "home", "none"), default="hold",
+                   help="at the end of a real-time show on a --link: come to rest and hold "
+                        "(default), or a limited move home; then the nodes are told, so no "
+                        "watchdog trips ('none': stop sending, the watchdogs stop the figure)")
     p.add_argument("--record", help="write the flight record to this file")
     p.add_argument("--output", help="write the setpoint frames to this file or device")
     p.add_argument("--link", help="send to servo nodes: serial:URL[@BAUD] or "

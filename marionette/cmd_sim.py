@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import stat
 import sys
 
 from marionette.config import load_config
@@ -31,6 +32,10 @@ def register(sub) -> None:
                                    "CLOCK_MONOTONIC of model time 0), tick, the simulated "
                                    "positions [unit] and their model time (whole 1 ms steps) "
                                    "to this .npz")
+    p.add_argument("--no-accel-clip", action="store_true",
+                   help="drives that do not clip acceleration (only speed and position limits), "
+                        "so that a command stream asking too much shows in the summary's "
+                        "peak_accel [unit/s^2, from positions sampled once per tick]")
     p.add_argument("--music", help="a node measures this recording's loudness, played from the "
                                    "start of the run, and reports it in LOUDNESS messages")
     p.add_argument("--loudness-node", type=int, help="the node that does (default: the figure's last)")
@@ -38,6 +43,19 @@ def register(sub) -> None:
                    help="run at this SCHED_FIFO priority when permitted (0: normal), so the "
                         "simulated nodes keep time on a busy machine")
     p.set_defaults(run=cmd_sim)
+
+
+def control_stdin(stdin) -> bool:
+    """Whether stdin may carry control lines: a pipe, or a terminal (read
+    only while the simulator is in its foreground: server.run checks again
+    before each read). Otherwise (`marionette sim --serial &` from a shell,
+    /dev/null, a file) it is left alone, so a background run is never
+    stopped for reading its terminal."""
+    try:
+        mode = os.fstat(stdin.fileno()).st_mode
+    except (AttributeError, OSError, ValueError):
+        return False
+    return stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode) or stdin.isatty()
 
 
 def cmd_sim(args) -> int:
@@ -61,7 +79,8 @@ def cmd_sim(args) -> int:
         music = read_wav(args.music)
     node = args.loudness_node if args.loudness_node is not None else max(a.node for a in config.axes)
     figure = SimFigure(config, faults, args.watchdog_ticks or DEFAULT_WATCHDOG_TICKS,
-                       trace=bool(args.trace), music=music, music_node=node)
+                       trace=bool(args.trace), music=music, music_node=node,
+                       clip_accel=not args.no_accel_clip)
     if args.can == "slcan":
         front = SlcanFrontEnd()
     elif args.can == "udp_multicast":
@@ -69,6 +88,6 @@ def cmd_sim(args) -> int:
     else:
         front = SerialFrontEnd()
     summary = run(figure, front, faults, seconds=args.seconds, trace_path=args.trace,
-                  control=sys.stdin)
+                  control=sys.stdin if control_stdin(sys.stdin) else None)
     print(json.dumps({"summary": summary}), flush=True)
     return 0

@@ -45,6 +45,8 @@ FRAME_SLOTS = 256        # setpoint frames waiting for the Python sender [ticks]
 DRAIN_INTERVAL = 0.05    # how often the Python threads empty the rings [s]
 SEND_INTERVAL = 0.001    # ... and the frame ring, for a link without a descriptor [s]
 MAX_RATE = 10.0          # playback rate bound [show ticks per tick]
+END_ACTIONS = (None, "hold", "home")   # Engine(end=...): at the end of a real-time run on a link
+SETTLE_TAUS = 5          # the servos are at rest this many time constants after their dead time
 
 
 def _raise_for(status: int, what: str) -> None:
@@ -105,13 +107,27 @@ class Engine:
     follower searches after it had a place; the records' FLAG_UNFOLLOWED):
     "flywheel" (play on at the last rate) or "hold" (stand at the place
     where it was lost, then blend back in); None: the figure's [follow] on_lost.
+    end: what a real-time run on a link does when it reaches max_ticks (the
+    end of the show): None (default) stops sending there, and the nodes'
+    watchdogs stop the figure; "hold" brings it to rest where braking ends
+    (the last pose, for a show that ends at rest), "home" makes a limited
+    move home; either way the engine holds until the servos have played out
+    their dead time and lag, then stops and tells the nodes (ESTOP, then
+    ESTOP_RELEASE: they hold where they stand, PRE_OPERATIONAL, watchdog
+    disarmed until the next setpoint), so no watchdog trips (wait()).
     """
 
     def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
                  interpolation: str = "cubic", output=None, protocol: str | None = None,
                  record=None, rate: float = 1.0, on_limits: str = "error", start_pose=None,
                  follow: str | None = None, poll: str = "all", follow_start: float | None = DEFAULT_START,
-                 on_lost: str | None = None):
+                 on_lost: str | None = None, end: str | None = None):
+        if end not in END_ACTIONS:
+            raise ValueError(f"end must be one of {END_ACTIONS}, not {end!r}")
+        self.end = end
+        self._end_thread: threading.Thread | None = None
+        self._rested = threading.Event()
+        self._cancel_end = threading.Event()
         if lead not in LEAD_MODES:
             raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
         if interpolation not in INTERPOLATIONS:
@@ -230,8 +246,9 @@ class Engine:
         was refused. max_ticks > 0 makes the loop stop by itself."""
         if not 0 <= priority <= 99:
             raise ValueError(f"priority must be 0..99, not {priority}")
+        safe_end = self.end is not None and self.supervisor is not None and max_ticks > 0
         status, report = self._core.start(priority, -1 if cpu is None else cpu,
-                                          lock_memory, max_ticks)
+                                          lock_memory, 0 if safe_end else max_ticks)
         if status == -errno.EBUSY:
             raise EngineError("start(): the real-time loop is already running")
         _raise_for(status, "starting the real-time loop")
@@ -252,7 +269,35 @@ class Engine:
         self._drain_thread.start()
         if self.supervisor is not None:
             self.supervisor.start()
+        if safe_end:
+            self._rested.clear()
+            self._cancel_end.clear()
+            self._end_thread = threading.Thread(target=self._come_to_rest, args=(max_ticks,),
+                                                name="marionette-end", daemon=True)
+            self._end_thread.start()
         return report
+
+    def _come_to_rest(self, last_tick: int) -> None:
+        """At tick last_tick - 1: the end action, then hold until the servos
+        have played out their dead time and lag; then _rested is set."""
+        def until(ready) -> bool:
+            while not self._cancel_end.wait(0.005):
+                rec = self._core.snapshot()
+                if rec is not None and ready(rec):
+                    return True
+            return False
+        if not until(lambda rec: int(rec["tick"]) >= last_tick - 1):
+            return
+        if self.end == "home":
+            self.home()
+        else:
+            self.stop_motion()
+        seen = self._latest_tick()
+        if not until(lambda rec: int(rec["tick"]) > seen + 1 and rec["flags"] & _core.FLAG_HOLDING):
+            return
+        settle = max(a.dead_time + SETTLE_TAUS * a.time_constant for a in self.config.axes)
+        if not self._cancel_end.wait(settle + 2 * self.config.tick_period):
+            self._rested.set()
 
     @property
     def running(self) -> bool:
@@ -260,6 +305,10 @@ class Engine:
 
     def stop(self) -> None:
         """Stop the real-time loop and drain what it left in the rings."""
+        if self._end_thread is not None:       # stopped before the end came: no end action
+            self._cancel_end.set()
+            self._end_thread.join()
+            self._end_thread = None
         _raise_for(self._core.stop(), "stopping the real-time loop")
         if self.supervisor is not None:
             self.supervisor.stop()
@@ -270,7 +319,19 @@ class Engine:
         self._drain()
 
     def wait(self, timeout: float | None = None) -> bool:
-        """Wait until the loop stops by itself (max_ticks); True if it did."""
+        """Wait until the loop stops by itself (max_ticks); True if it did.
+        With end="hold" or "home" on a link: until the figure has come to
+        rest after max_ticks; then the loop stops and the nodes are told."""
+        if self._end_thread is not None:
+            if not self._rested.wait(timeout):
+                return False
+            _raise_for(self._core.stop(), "stopping the real-time loop")
+            self.supervisor.estop()         # at rest: the quick stop moves nothing ...
+            time.sleep(2 * self.config.tick_period)
+            self.supervisor.release()       # ... and the release leaves the nodes holding
+            self._end_thread.join()
+            self._end_thread = None
+            return True
         end = None if timeout is None else time.monotonic() + timeout
         while self._core.running:
             if end is not None and time.monotonic() >= end:

@@ -21,8 +21,11 @@ from marionette.sim.node import DEFAULT_WATCHDOG_TICKS, SimNode
 class SimFigure:
     def __init__(self, config: FigureConfig, faults: Faults | None = None,
                  watchdog_ticks: int = DEFAULT_WATCHDOG_TICKS, trace: bool = False,
-                 music: tuple[np.ndarray, float] | None = None, music_node: int | None = None):
-        """music: (samples, sample rate [Hz]) of a recording that plays from
+                 music: tuple[np.ndarray, float] | None = None, music_node: int | None = None,
+                 clip_accel: bool = True):
+        """clip_accel: False for drives that do not clip acceleration
+        (ServoModel), so that a command stream asking too much shows in
+        peak_accel(). music: (samples, sample rate [Hz]) of a recording that plays from
         model time 0; node music_node measures it and answers each SYNC with
         a LOUDNESS of the tick period just before that SYNC."""
         self.config = config
@@ -30,7 +33,7 @@ class SimFigure:
         by_node = defaultdict(list)
         for a in config.axes:
             by_node[a.node].append(a)
-        self.nodes = {n: SimNode(n, axes, config.tick_period, watchdog_ticks)
+        self.nodes = {n: SimNode(n, axes, config.tick_period, watchdog_ticks, clip_accel)
                       for n, axes in sorted(by_node.items())}
         # where each figure axis lives: (node, index on that node)
         self._where = [(a.node, self.nodes[a.node].channels.index(a.channel)) for a in config.axes]
@@ -48,6 +51,16 @@ class SimFigure:
     def positions(self) -> np.ndarray:
         """Actual positions [unit] of the figure's axes, in configuration order."""
         return np.array([self.nodes[n].model.position[j] for n, j in self._where])
+
+    def peak_accel(self) -> np.ndarray:
+        """Largest physical acceleration so far [unit/s^2] per axis, in
+        configuration order (ServoModel.peak_accel)."""
+        return np.array([self.nodes[n].model.peak_accel[j] for n, j in self._where])
+
+    @property
+    def time(self) -> float:
+        """Model time the drives have run to [s]."""
+        return min(node.model.time for node in self.nodes.values())
 
     def advance_to(self, t: float) -> None:
         for node in self.nodes.values():

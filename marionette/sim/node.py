@@ -34,12 +34,12 @@ class SimNode:
     """A node with channels 0..k-1 (the figure's axes on this node)."""
 
     def __init__(self, node: int, axes: Sequence[AxisConfig], tick_period: float,
-                 watchdog_ticks: int = DEFAULT_WATCHDOG_TICKS):
+                 watchdog_ticks: int = DEFAULT_WATCHDOG_TICKS, clip_accel: bool = True):
         self.node = node
         self.axes = sorted(axes, key=lambda a: a.channel)
         self.channels = [a.channel for a in self.axes]
         self.tick_period = tick_period                                      # [s]
-        self.model = ServoModel(self.axes, tick_period)
+        self.model = ServoModel(self.axes, tick_period, clip_accel=clip_accel)
         self.scale = np.array([a.scale for a in self.axes])                 # [counts/unit]
         self.offset = np.array([a.offset for a in self.axes])               # [counts]
         self.min_counts = np.array([self.counts_of(j, a.min) for j, a in enumerate(self.axes)])
@@ -73,10 +73,10 @@ class SimNode:
         self.model.advance_to(t)
 
     def _ramp_to_rest(self) -> None:
-        """Command the point where each channel can stop at its acceleration limit."""
-        v = self.model.velocity
-        stop = self.model.position + v * np.abs(v) / (2 * self.model.max_accel)
-        self.model.set_command(np.clip(stop, self.model.lower, self.model.upper))
+        """The drive's quick stop: every channel ramps its velocity to rest at
+        its acceleration limit from where it physically is, whatever
+        setpoints are still inside its dead time (ServoModel.brake)."""
+        self.model.brake()
 
     def on_setpoint(self, tick: int, channel: int, counts: int, t: float) -> None:
         """A setpoint [counts] for one channel, tick counter `tick`, at model time t [s]
@@ -97,6 +97,8 @@ class SimNode:
         if clamped != counts:
             self.counters.clamped += 1
             self.limited = True
+        if self.watchdog:                       # following again after the watchdog's stop
+            self.model.release()
         self.model.set_channel(j, (clamped - self.offset[j]) / self.scale[j])
         self.counters.setpoints += 1
         self.last_setpoint_time = t
@@ -142,7 +144,7 @@ class SimNode:
             self.estop = False
             self.following = False              # PRE_OPERATIONAL until the next setpoint
             self.last_tick = None
-            self.model.set_command(self.model.position)     # hold where it stopped
+            self.model.release()                            # hold where it stopped
 
     def on_config(self, config: protocol.Config, t: float) -> list:
         """Take new limits and watchdog time; answers with a NACK (reason 0: accepted)."""

@@ -9,7 +9,10 @@ Front ends:
 * udp_multicast: python-can's udp_multicast bus (needs msgpack).
 
 Control lines on stdin change the faults at run time (see Faults.apply) or
-end the run ('quit'); each answer is one JSON line on stdout.
+end the run ('quit'); each answer is one JSON line on stdout. `marionette
+sim` reads them from a pipe, or from its terminal while it is in the
+terminal's foreground; in the background (`marionette sim --serial &`) it
+leaves the terminal alone.
 """
 from __future__ import annotations
 
@@ -29,6 +32,7 @@ from marionette.sim.figure import SimFigure
 from marionette.sim.slcan import Pty, SlcanAdapter
 
 POLL = 0.001                # longest wait in the loop [s]
+IDLE_ADVANCE = 0.02         # the drives run on (watchdogs, quick stops) at least this often [s]
 
 
 def say(**fields) -> None:
@@ -157,6 +161,13 @@ def _write_all(fd: int, data: bytes) -> None:
         view = view[n:]
 
 
+def _in_foreground(tty) -> bool:
+    try:
+        return os.tcgetpgrp(tty.fileno()) == os.getpgrp()
+    except OSError:
+        return False
+
+
 class _Stop(Exception):
     pass
 
@@ -176,9 +187,11 @@ def run(figure: SimFigure, front, faults: Faults, seconds: float | None = None,
         _serve(figure, front, faults, seconds, control, t0)
     except (_Stop, KeyboardInterrupt):
         pass
+    figure.advance_to(time.monotonic() - t0)    # the watchdogs act up to the end
     summary = {"messages": figure.messages, "link": front.counters(),
                "bytes_dropped": faults.bytes_dropped, "bytes_corrupted": faults.bytes_corrupted,
-               "nodes": {n: vars(s.counters) for n, s in figure.nodes.items()}}
+               "nodes": {n: vars(s.counters) for n, s in figure.nodes.items()},
+               "peak_accel": dict(zip(figure.config.axis_names, figure.peak_accel().tolist()))}
     if trace_path:
         np.savez(trace_path, t0=t0, **figure.trace_arrays())
     front.close()
@@ -190,13 +203,15 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
     now = lambda: time.monotonic() - t0
     pending: list = []          # (due time [s], order, message): the delay fault
     order = 0
-    watch = [front.fd] + ([control] if control is not None else [])
+    tty = control is not None and control.isatty()
     while seconds is None or now() < seconds:
-        readable, _, _ = select.select(watch, [], [], POLL)
+        # a terminal is read only while it has us in its foreground (a read
+        # from the background would stop the process: SIGTTIN)
+        listen = control is not None and (not tty or _in_foreground(control))
+        readable, _, _ = select.select([front.fd] + ([control] if listen else []), [], [], POLL)
         if control is not None and control in readable:
             line = control.readline()
-            if not line:                    # stdin closed (e.g. /dev/null): run on
-                watch.remove(control)
+            if not line:                    # stdin closed: run on
                 control = None
             elif line.strip() == "quit":
                 return
@@ -213,3 +228,5 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
         while pending and pending[0][0] <= now():
             due, _, m = heapq.heappop(pending)
             front.send(figure.handle(m, due, front.rejected))
+        if not pending and now() - figure.time > IDLE_ADVANCE:     # no host: time goes on
+            figure.advance_to(now())

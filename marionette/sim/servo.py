@@ -7,6 +7,30 @@ whose speed and acceleration are limited, inside the position limits. The
 model is integrated at a fine internal step (1 ms by default), vectorised
 over the channels.
 
+Two modes. By default (clip_accel=True) the drive also clips each step's
+change of velocity to the axis's acceleration limit, as a drive with its own
+acceleration ramp would. With clip_accel=False it does not: the model is
+the bare behaviour model (dead time + first-order lag, only speed and
+position limits), so a command stream that asks for more than the axis
+can do shows up as a physical acceleration above the limit. Either way
+`peak_accel` is the largest physical acceleration seen per axis [unit/s^2],
+at the scale of a tick: (x(t) - 2 x(t - T) + x(t - 2T)) / T^2 at every
+fine step t. The lag's velocity jumps at each held setpoint, so a finer
+measure would see the staircase, not the motion. A command stream whose own acceleration
+is within the limit gives a physical one within it (the lag, sampled at the
+tick, averages past commands with non-negative weights).
+
+`brake()` is a drive's own quick stop (the node's e-stop and watchdog):
+from that step on the setpoints, also those still inside the dead time,
+are ignored; the lag's input goes on from where it is, one step a tick as
+the setpoints came, at its velocity over the last tick, and ramps to rest
+at the acceleration limit. The drive follows it through its lag, so it
+decelerates within the limit and comes to rest where the input does,
+without passing that point.
+
+At a position limit the drive stops dead: the position is clipped and any
+velocity pointing out of the range is zeroed, at both limits alike.
+
 A figure's `dead_time` is what identification measures at the tick: it
 includes the half tick that holding each setpoint adds. The servo itself
 therefore waits `dead_time - tick_period / 2` (never less than zero).
@@ -26,8 +50,9 @@ class ServoModel:
     """Simulated servos for a list of axes, advanced in fine steps."""
 
     def __init__(self, axes: Sequence[AxisConfig], tick_period: float, step: float = FINE_STEP,
-                 start: Sequence[float] | None = None):
+                 start: Sequence[float] | None = None, clip_accel: bool = True):
         self.axes = tuple(axes)
+        self.clip_accel = bool(clip_accel)
         self.step = float(step)                                              # [s]
         n = len(self.axes)
         lag = np.array([a.time_constant for a in self.axes])                 # [s]
@@ -48,6 +73,23 @@ class ServoModel:
         self._line = np.tile(x0, (depth, 1))
         self._head = 0
         self.time = 0.0                                                      # model time [s]
+        self.braking = np.zeros(n, dtype=bool)   # quick stop in progress or done (brake())
+        # physical acceleration at the scale of a tick, from the positions
+        # of the last 2 ticks (a ring of fine steps)
+        self.sample_steps = max(1, int(round(tick_period / self.step)))      # [steps]
+        self.peak_accel = np.zeros(n)                                        # [unit/s^2]
+        self._past = np.tile(x0, (2 * self.sample_steps + 1, 1))             # [unit]
+        self._steps = 0                          # fine steps taken
+        self._brake_x = x0.copy()                # quick stop: the lag's input [unit] ...
+        self._brake_v = np.zeros(n)              # ... and its velocity [unit/s]
+        self._inputs = np.tile(x0, (self.sample_steps + 1, 1))   # the lag's input over the last tick [unit]
+        self._held = np.zeros(n, dtype=int)      # fine steps since the input last changed
+        self._brake_phase = np.zeros(n, dtype=int)   # fine steps since the quick stop's last step
+        self._tau = np.array([a.time_constant for a in self.axes])           # [s]
+
+    def reset_peak(self) -> None:
+        """Forget the peak acceleration seen so far."""
+        self.peak_accel[:] = 0.0
 
     def set_command(self, command) -> None:
         """Hold these setpoints [unit] from now on (NaN keeps a channel's old one)."""
@@ -56,6 +98,35 @@ class ServoModel:
 
     def set_channel(self, j: int, value: float) -> None:
         self.command[j] = value
+
+    def _back(self, steps: int) -> np.ndarray:
+        """Positions [unit] this many fine steps ago (at most 2 ticks)."""
+        return self._past[(self._steps - steps) % self._past.shape[0]]
+
+    def brake(self) -> None:
+        """Quick stop: ignore setpoints (also those inside the dead time);
+        the lag's input, from where it is and its velocity over the last
+        tick [unit/s], ramps to rest at the acceleration limit in steps of a
+        tick; the drive follows it through its lag and holds there (until
+        release())."""
+        new = ~self.braking
+        window = self.sample_steps * self.step                              # [s]
+        now = self._inputs[self._steps % self._inputs.shape[0]]
+        v = (now - self._inputs[(self._steps + 1) % self._inputs.shape[0]]) / window
+        # a drive far behind its input (at top speed) stops near where it is:
+        # the input leads it by no more than the lag lets it follow
+        lead = self.max_speed * self._tau                                   # [unit]
+        self._brake_x[new] = (self.position + np.clip(now - self.position, -lead, lead))[new]
+        self._brake_v[new] = np.clip(v, -self.max_speed, self.max_speed)[new]
+        self._brake_phase[new] = (np.minimum(self._held, self.sample_steps) - 1)[new]
+        self.braking[:] = True
+
+    def release(self) -> None:
+        """End a quick stop: hold the present position until new setpoints come."""
+        self.braking[:] = False
+        self.command = self.position.copy()
+        self._line[:] = self.position
+        self._inputs[:] = self.position
 
     def advance(self, seconds: float) -> None:
         """Integrate the model forward by seconds [s] (whole fine steps)."""
@@ -66,14 +137,41 @@ class ServoModel:
             self._head = (self._head + 1) % depth
             self._line[self._head] = self.command
             delayed = self._line[(self._head - self.delay_steps) % depth, cols]
+            if self.braking.any():
+                # the quick stop's input: a staircase, one step a tick in the
+                # phase of the setpoints it replaces, its velocity ramping to
+                # rest at max_accel (a command stream within the limits)
+                self._brake_phase += 1
+                due = self.braking & (self._brake_phase >= self.sample_steps)
+                if due.any():
+                    T = self.sample_steps * self.step                        # [s]
+                    bv = self._brake_v
+                    bv[due] -= (np.sign(bv) * np.minimum(np.abs(bv), self.max_accel * T))[due]
+                    self._brake_x[due] += bv[due] * T
+                    self._brake_phase[due] = 0
+                delayed = np.where(self.braking, self._brake_x, delayed)
+            last = self._inputs[self._steps % self._inputs.shape[0]]
+            self._held = np.where(delayed == last, self._held + 1, 1)
+            self._inputs[(self._steps + 1) % self._inputs.shape[0]] = delayed
             wanted = self._alpha * (delayed - self.position) / self.step     # [unit/s]
             wanted = np.clip(wanted, -self.max_speed, self.max_speed)
-            dv = np.clip(wanted - self.velocity, -self.max_accel * self.step, self.max_accel * self.step)
+            dv = wanted - self.velocity
+            if self.clip_accel:
+                dv = np.clip(dv, -self.max_accel * self.step, self.max_accel * self.step)
             self.velocity += dv
             self.position += self.velocity * self.step
-            low, high = self.position < self.lower, self.position > self.upper
             self.position = np.clip(self.position, self.lower, self.upper)
-            self.velocity[low | high] = 0.0
+            # stopped dead at a limit: no velocity out of the range (both alike)
+            out = ((self.position <= self.lower) & (self.velocity < 0)) | \
+                  ((self.position >= self.upper) & (self.velocity > 0))
+            self.velocity[out] = 0.0
+            self.command = np.where(self.braking, self._brake_x, self.command)
+            self._steps += 1
+            self._past[self._steps % self._past.shape[0]] = self.position
+            T = self.sample_steps * self.step                                # [s]
+            a = np.abs(self.position - 2 * self._back(self.sample_steps)
+                       + self._back(2 * self.sample_steps)) / (T * T)
+            np.maximum(self.peak_accel, a, out=self.peak_accel)
         self.time += steps * self.step
 
     def advance_to(self, t: float) -> None:

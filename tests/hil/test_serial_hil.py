@@ -248,3 +248,30 @@ def test_one_node_polled_per_tick_on_a_slow_shared_line(sim, figure):
     missed = nodes.nodes[2].last_tick + len(order)                  # its first unanswered poll
     reported_at, _, evidence = reports[0]
     assert evidence - missed >= 2 * len(order) and reported_at - missed <= 3 * len(order) + 1
+
+
+def test_a_normal_end_comes_to_rest_and_trips_no_watchdog(sim, figure, tmp_path):
+    """`marionette play --realtime --link` against the simulator process: at
+    the end of the show the figure comes to rest and the nodes are told, so
+    no watchdog trips (--end none: every node's trips, as before)."""
+    from conftest import run_cli
+    show = dance_from_home(figure, 3.0, seed=21, fraction=0.4)
+    path = tmp_path / "dance.npz"
+    show.save(path)
+    show.positions[:, -40:] = show.positions[:, -41:-40]    # ... and one that ends moving
+    moving = tmp_path / "moving.npz"
+    show.save(moving)
+    for end, shown, trips in (("none", path, 1), ("hold", path, 0), ("hold", moving, 0),
+                              ("home", moving, 0)):
+        s = sim("--serial", "--priority", SIM_PRIORITY, "--no-accel-clip")
+        out = run_cli("play", shown, "--realtime", "--priority", 0, "--link",
+                      f"serial:{s.ready['serial']}", "--end", end)
+        assert out.returncode == 0, out.stderr
+        time.sleep(0.3)                     # longer than the watchdog (5 ticks)
+        summary = s.quit()
+        assert {n: c["watchdog_trips"] for n, c in summary["nodes"].items()} == \
+               {n: trips for n in summary["nodes"]}, (end, shown.name, summary["nodes"])
+        assert all(c["ignored_estop"] == 0 for c in summary["nodes"].values())
+        # (no check of peak_accel here: in real time the setpoints' arrival
+        # jitter on a loaded machine alone moves it; tests/sim/test_stops.py
+        # checks it on a virtual clock)

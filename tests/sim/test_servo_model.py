@@ -61,3 +61,49 @@ def test_nan_command_keeps_the_old_setpoint():
 def test_dead_time_shorter_than_half_a_tick_is_zero(dead):
     config = make_figure(1, dead_time=dead)
     assert ServoModel(config.axes, T).delay_steps.tolist() == [0]
+
+
+def test_both_limits_alike_stop_dead_and_are_left_at_once():
+    """Driven into either limit (and mirrored, the other), with or without
+    acceleration clipping: no velocity out of the range while clipped, and
+    after a command back the axis leaves the limit after its dead time, the
+    same step at both limits."""
+    rng = np.random.default_rng(20261201)
+    for case in range(40):
+        clip = bool(case % 2)
+        lo, hi = rng.uniform(-2, 0.5), rng.uniform(0.6, 3)
+        config = make_figure(1, min=lo, max=hi, home=(lo + hi) / 2, max_speed=rng.uniform(0.3, 3),
+                             max_accel=rng.uniform(1, 30), dead_time=rng.uniform(0.01, 0.1),
+                             time_constant=rng.uniform(0.01, 0.2))
+        left = {}
+        for side, edge, sign in (("upper", hi, 1.0), ("lower", lo, -1.0)):
+            m = ServoModel(config.axes, T, clip_accel=clip)
+            m.set_command([edge + sign * rng.uniform(0.1, 1)])
+            for _ in range(4000):
+                m.advance(0.001)
+                if m.position[0] == edge:
+                    assert sign * m.velocity[0] <= 0, (case, side, m.velocity)
+            assert m.position[0] == edge, (case, side)
+            m.set_command([edge - sign * 0.3 * (hi - lo)])
+            for k in range(1, 1000):
+                m.advance(0.001)
+                if m.position[0] != edge:
+                    left[side] = k
+                    break
+        assert left["upper"] == left["lower"] <= m.delay_steps[0] + 1, (case, left)
+
+
+def test_without_acceleration_clipping_a_jump_shows_in_the_peak():
+    config = make_figure(1, max_speed=2.0, max_accel=20.0)
+    for clip, expect_violation in ((True, False), (False, True)):
+        m = ServoModel(config.axes, T, start=[0.0], clip_accel=clip)
+        m.set_command([0.5])                    # a jump of the setpoint
+        m.advance(1.0)
+        assert (m.peak_accel[0] > 20.0 * 1.02) == expect_violation, (clip, m.peak_accel)
+    # a stream within the limit stays within it, also unclipped
+    m = ServoModel(config.axes, T, start=[0.0], clip_accel=False)
+    t = np.arange(200) * T
+    for x in 0.4 * np.sin(2 * np.pi * 0.5 * t) * np.minimum(1, t):       # 0.5 Hz, faded in
+        m.set_command([x])
+        m.advance(T)
+    assert 0 < m.peak_accel[0] <= 20.0, m.peak_accel

@@ -67,7 +67,7 @@ def test_watchdog_holds_for_its_time_then_brakes_within_the_limit(figure):
     x = np.array(xs)
     a = np.diff(x, 2, axis=0) / T ** 2
     assert np.all(np.abs(a) <= np.array([ax.max_accel for ax in figure.axes]) * 1.001)
-    assert np.abs(x[-1] - x[-2]).max() < 1e-5                  # at rest (the lag's creep)
+    assert np.abs(x[-1] - x[-2]).max() < 1e-4                  # at rest (the lag's creep)
     # a new setpoint clears it: the node follows again
     s = statuses(tick(sim, figure, 140) + tick(sim, figure, 141), node=1)[-1]
     assert not s.flags & protocol.FLAG_WATCHDOG and s.state == protocol.STATE_OPERATIONAL
