@@ -34,10 +34,17 @@ LIMIT_WINDOW = 5.0       # limiter activity shown over this many recent seconds 
 STOP_TIMEOUT = 10.0      # a controlled stop waits at most this long for rest [s]
 STATUS_PREFIX = "status: "  # how a headless text line begins (grep -v '^status: ')
 STEP_CHUNK = 25          # step mode: ticks between looks at the keys and the stop [ticks]
-INTERRUPTED = 130        # exit status after Ctrl-C (128 + SIGINT)
 BARS = " ▁▂▃▄▅▆▇█"
 KEYS = (("space", "pause/resume"), ("e", "e-stop"), ("r", "release"), ("h", "home"),
         ("b", "blend in"), ("q", "stop and quit"))
+# key -> (Engine method, paused after it (None: as it was), message); space is
+# pause or resume, q a controlled stop (View.controlled_stop)
+ACTIONS = {"pause": ("stop_motion", True, "paused: limited stop, holding"),
+           "resume": ("blend_in", False, "resumed: blending back in"),
+           "e": ("estop", True, "E-STOP: nodes latched, commands ramped to rest"),
+           "r": ("release_estop", None, "e-stop released: holding (b blends in)"),
+           "h": ("home", True, "homing"),
+           "b": ("blend_in", False, "blending in")}
 FLAG_NAMES = ((_core.FLAG_LIMITED, "limited"), (_core.FLAG_END, "end"),
               (_core.FLAG_BAD_INPUT, "bad input"), (_core.FLAG_MOVING, "moving"),
               (_core.FLAG_HOLDING, "holding"), (_core.FLAG_UNFOLLOWED, "unfollowed"))
@@ -205,28 +212,17 @@ class View:
     # -- operator actions (any thread) -----------------------------------
 
     def action(self, key: str) -> None:
-        e = self.engine
-        if key == " ":
-            if self.paused:
-                e.blend_in()
-                self.paused, self.message = False, "resumed: blending back in"
-            else:
-                e.stop_motion()
-                self.paused, self.message = True, "paused: limited stop, holding"
-        elif key == "e":
-            e.estop()
-            self.paused, self.message = True, "E-STOP: nodes latched, commands ramped to rest"
-        elif key == "r":
-            e.release_estop()
-            self.message = "e-stop released: holding (b blends in)"
-        elif key == "h":
-            e.home()
-            self.paused, self.message = True, "homing"
-        elif key == "b":
-            e.blend_in()
-            self.paused, self.message = False, "blending in"
-        elif key == "q":
+        """What a key does (KEYS): an engine request, then the message shown."""
+        if key == "q":
             self.controlled_stop("q")
+            return
+        if key == " ":
+            key = "resume" if self.paused else "pause"
+        if key in ACTIONS:
+            request, paused, message = ACTIONS[key]
+            getattr(self.engine, request)()
+            self.paused = self.paused if paused is None else paused
+            self.message = message
 
     def controlled_stop(self, why: str) -> None:
         if self._stop_at is None:
@@ -237,11 +233,11 @@ class View:
 
     def _on_signal(self, sig, frame) -> None:
         if sig == signal.SIGINT and self._stop_at is None:
-            self.status = INTERRUPTED
+            self.status = 128 + signal.SIGINT     # 130, as a shell reports Ctrl-C
             self.controlled_stop("Ctrl-C")
             return
         self.engine.estop()               # a second Ctrl-C, or SIGTERM
-        self.status = INTERRUPTED
+        self.status = 128 + sig                   # 130, or 143 for SIGTERM
         self.ended_by = ("second Ctrl-C" if sig == signal.SIGINT else "SIGTERM") + ": e-stop"
         self._end.set()
 

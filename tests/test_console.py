@@ -201,3 +201,13 @@ def test_a_second_ctrl_c_estops_and_ends(tmp_path):
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "ended early by second Ctrl-C: e-stop" in err
     assert out.startswith("played ")
+
+
+def test_sigterm_estops_and_ends_with_the_summary(tmp_path):
+    proc = play_process(tmp_path / "flight.bin")
+    time.sleep(2.0)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143, err
+    assert "Traceback" not in err and "ended early by SIGTERM: e-stop" in err
+    assert out.startswith("played ")
