@@ -29,6 +29,7 @@ from marionette import _core, protocol
 
 REFRESH = 0.1            # console refresh interval [s]
 STATUS_INTERVAL = 1.0    # headless status line interval [s]
+MESSAGES = 4             # stderr lines shown in the console
 STRIP = 60               # loudness strip length [samples of REFRESH]
 LIMIT_WINDOW = 5.0       # limiter activity shown over this many recent seconds [s]
 STOP_TIMEOUT = 10.0      # a controlled stop waits at most this long for rest [s]
@@ -303,6 +304,15 @@ class View:
             print(f"play: ended early by {self.ended_by}", file=sys.stderr, flush=True)
 
 
+def foreground(stream) -> bool:
+    """stream is a terminal, and this process is in its foreground job."""
+    try:
+        fd = stream.fileno()
+        return os.isatty(fd) and os.tcgetpgrp(fd) == os.getpgrp()
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
 class Keys:
     """Single keys from the terminal in cbreak mode, read on their own thread;
     the terminal's mode is restored by stop() (and at exit, whatever happens)."""
@@ -359,13 +369,17 @@ class Console(View):
         super().__init__(engine, realtime=False)     # no status lines
         self.realtime = realtime
         self.live = Live(console=RichConsole(file=sys.stdout), screen=True, auto_refresh=False,
-                         transient=True)
+                         transient=True, redirect_stdout=False, redirect_stderr=False)
+        # what others print on stderr meanwhile (the lost-music lines, a lost
+        # audio input) is shown in the console and printed again at its end
+        self.messages = Messages(sys.stderr)
+        sys.stderr = self.messages
         self.live.start()
-        self.keys = None
-        try:
-            self.keys = Keys(self._key)
-        except Exception:                 # no terminal on stdin: a view without keys
-            self.message = "keys unavailable: stdin is not a terminal"
+        # keys only from this job's own terminal: a background job that
+        # changed the terminal's mode would be stopped (SIGTTOU)
+        self.keys = Keys(self._key) if foreground(sys.stdin) else None
+        if self.keys is None:
+            self.message = "no keys: stdin is not this job's terminal"
         self._thread = threading.Thread(target=self._loop, name="marionette-console", daemon=True)
         self._thread.start()
 
@@ -436,6 +450,9 @@ class Console(View):
         keys = "   ".join(f"[bold]{k}[/bold] {what}" for k, what in KEYS)
         parts.append(Panel(Text.from_markup(keys + (f"\n{self.message}" if self.message else "")),
                            title="keys"))
+        if self.messages.lines:
+            parts.append(Panel(Text("\n".join(list(self.messages.lines)[-MESSAGES:])),
+                               title="messages"))
         return Group(*parts)
 
     def _shutdown(self) -> None:
@@ -445,6 +462,34 @@ class Console(View):
                 self.keys.stop()
         finally:
             self.live.stop()
+            sys.stderr = self.messages.stream
+            for line in self.messages.lines + ([self.messages._part] if self.messages._part else []):
+                print(line, file=sys.stderr, flush=True)
+
+
+class Messages:
+    """A stand-in for sys.stderr while the console is up: keeps whole lines."""
+
+    def __init__(self, stream):
+        self.stream = stream
+        self.lines: list[str] = []
+        self._part = ""
+        self._lock = threading.Lock()
+
+    def write(self, text: str) -> int:
+        with self._lock:
+            *whole, self._part = (self._part + text).split("\n")
+            self.lines.extend(whole)
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+    def isatty(self) -> bool:
+        return False
+
+    def fileno(self) -> int:
+        return self.stream.fileno()
 
 
 def sparkline(values, other) -> str:

@@ -149,6 +149,20 @@ def test_console_without_rich_falls_back_to_headless(tmux):
     assert term.exit_status() == 0
 
 
+def test_stderr_lines_during_the_console_are_shown_and_kept(tmux):
+    """What other threads print on stderr (a lost-music line, say) shows in
+    the console, and again on the normal screen after it."""
+    code = ("import sys, threading; from marionette.cli import main; "
+            "threading.Timer(1.0, lambda: print('a line from a thread', file=sys.stderr)).start(); "
+            "sys.exit(main(['play', '--realtime', '--priority', '0', '--ticks', '150']))")
+    term = tmux([sys.executable, "-c", code])
+    screen = term.wait_for("a line from a thread")
+    assert "messages" in screen and "space pause/resume" in screen
+    screen = term.wait_for("played ")
+    assert term.exit_status() == 0
+    assert "a line from a thread" in screen.split("played ")[0]
+
+
 def test_headless_status_lines_and_json():
     result = run("play", "--realtime", "--priority", "0", "--ticks", "120", "--json")
     assert result.returncode == 0, result.stderr
