@@ -16,6 +16,7 @@ import numpy as np
 
 from marionette.cmd_sync_sim import add_start_argument
 from marionette.config import load_config
+from marionette.console import open_view
 from marionette.demo import DEMO_SHOW
 from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
@@ -93,6 +94,7 @@ def cmd_play(args) -> int:
         from marionette.transport import open_link
         output = open_link(args.link)
     audio, watcher, engine_box = None, None, []
+    view = None
     on_lost = config.follow.on_lost
     try:
         if args.audio_device is not None:
@@ -109,6 +111,7 @@ def cmd_play(args) -> int:
                 engine.source_lost(audio.lost_reason)
             if live is not None:
                 live.sink = engine.push_loudness
+            view = open_view(args, engine)      # the live console or status lines, Ctrl-C
             if args.realtime:
                 engine.start(priority=args.priority, cpu=args.cpu, lock_memory=args.lock_memory,
                              max_ticks=n)
@@ -116,20 +119,22 @@ def cmd_play(args) -> int:
                     watcher = LostWatcher(engine, period, on_lost).start()
                 if live is not None:
                     live.start()
-                engine.wait()
+                view.wait()
                 engine.stop()
                 if watcher is not None:
                     watcher.stop()
             elif live is not None:       # tick k has heard frame k - 1, as in sync-sim
                 for k in range(n):
                     live.feed_tick(k)
-                    engine.step(1)
+                    view.step(1)
             else:
-                engine.step(n)
+                view.step(n)
             stats = engine.stats()
             records = engine.records()
             nodes = engine.nodes.summary() if engine.nodes is not None else None
     finally:
+        if view is not None:
+            view.close()
         if live is not None:
             live.stop()
         if watcher is not None:
@@ -199,7 +204,7 @@ def cmd_play(args) -> int:
     if verdict:
         print(verdict)
         status = 1
-    return status
+    return status or view.status
 
 
 def cmd_shape(args) -> int:
@@ -233,6 +238,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("play", help="play a show through the engine and print a summary")
     figure_args(p)
     p.add_argument("--realtime", action="store_true", help="run the real-time loop (default: step mode)")
+    p.add_argument("--headless", action="store_true",
+                   help="no live console: in real time one status line per second on stderr "
+                        "(also whenever stdout is not a terminal; docs/console.md)")
+    p.add_argument("--json", action="store_true", help="the status lines as JSON lines (headless)")
     p.add_argument("--ticks", type=int, help="ticks to run (default: the whole show)")
     p.add_argument("--rate", type=float, default=1.0, help="playback rate [show ticks per tick]")
     p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag")
@@ -306,6 +315,9 @@ def main(argv: list[str] | None = None) -> int:
     except MarionetteError as exc:
         print(f"marionette: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:      # outside a show (a show's own Ctrl-C: marionette.console)
+        print("marionette: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -26,6 +26,8 @@ class FlightRecorder:
         self.count = 0                     # records kept [ticks]
         self._chunks: list[np.ndarray] = []
         self._file = None
+        # called with each batch of records as it is added (on the drain thread)
+        self.listeners: list = []
         if self.path is not None:
             header = dict(meta or {}, axis_names=list(axis_names),
                           record_bytes=dtype.itemsize)
@@ -36,6 +38,8 @@ class FlightRecorder:
         if not len(records):
             return
         self.count += len(records)
+        for listen in self.listeners:
+            listen(records)
         if self._file is not None:
             self._file.write(records.tobytes())
         else:
