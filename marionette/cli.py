@@ -1,7 +1,7 @@
 """The ``marionette`` command.
 
     marionette play [SHOW] [--config FIGURE.toml] [--realtime] [--link ...] [--music ...]
-    marionette check | shape | calibrate | teach | plot | sim | sync-sim ...
+    marionette check | shape | calibrate | teach | plot | sim | sync-sim | log ...
     marionette bench tick|jitter|moves|fuzz|link|sync [...]
 """
 from __future__ import annotations
