@@ -318,6 +318,7 @@ struct mar_follow {
     /* the cue (mar_follow_cue) */
     double cue_from;            /* the first audible stored frame at or after the cue [stored ticks] */
     int cue_pending;            /* cued, the music started, no fit has locked yet: never LOCKED by tracking */
+    int cue_refine;             /* a fit locked the cue: later fits over more music may correct its line */
     uint64_t cue_onset;         /* step of the music's first frame */
     int cue_fits;               /* joint fits done */
     double cue_prev;            /* the last fit's line at its step if it was clear [stored ticks], else NaN */
@@ -670,7 +671,7 @@ static void stop_search(mar_follow *f)
 void mar_follow_reset(mar_follow *f, double position)
 {
     f->ticks_since_frame = f->unstepped = 0;
-    f->cue_pending = 0;
+    f->cue_pending = f->cue_refine = 0;
     f->silent_run = f->loud_run = 0;
     f->bad_since = f->quiet_since = 0;
     f->last_good = f->t;
@@ -1478,7 +1479,7 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->silent_run = 0;
     f->conf = (e->fine - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->measured = 0;
-    f->doubt = f->probation = f->regaining = f->unproven = f->cue_pending = 0;
+    f->doubt = f->probation = f->regaining = f->unproven = f->cue_pending = f->cue_refine = 0;
     f->h_slow = f->h_fast = e->fine;
     f->have_gain = 0;
     update_gain(f, f->kf.p, f->kf.r, f->tk.verify_window);
@@ -1687,6 +1688,7 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         double rate_sd = 1.0 / (double)ages;                    /* a tick over the fit [1] */
         mar_kf_init(&f->kf, 0.25, rate_sd * rate_sd);
         f->cue_pending = 0;
+        f->cue_refine = f->opt.mode == MAR_FOLLOW_SMOOTH;
         f->located = f->measured = 1;
         f->state = MAR_FOLLOW_LOCKED;
         f->last_good = f->t;
@@ -1708,6 +1710,66 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         f->state = MAR_FOLLOW_SEARCHING;
         f->doubt = f->probation = f->regaining = 0;
         start_search(f, f->cue_onset);                          /* running since the first frame */
+    }
+}
+
+/* The correlation of the live frames of the last `ages` with the stored
+ * feature (loudness, or onsets when ch is 1) exactly on the line (p, r):
+ * lag 0 of the resampled window; -1 when too few frames lie on it. */
+static double line_score(mar_follow *f, int ch, double p, double r, size_t ages)
+{
+    long j0;
+    double c, rho[1];
+    size_t m = resample_ch(f, ch ? f->lo : f->lf, p, r, ages, &j0, &c);
+    if (m < ages / 2)
+        return -1.0;
+    correlate_ch(f, ch ? f->of : f->sf, ch ? f->o1 : f->p1, ch ? f->o2 : f->p2, f->rs, 0, m, j0, 0, rho);
+    return rho[0];
+}
+
+/* After a cue lock, until the music since the onset fills the tracker's
+ * window: the line through the cue fitted to all of it (at the cue's fit
+ * times), against the tracker's own line on the very same frames. The
+ * lock came from 0.5-1 s of music, where a line a few percent off in rate
+ * that crosses the right one in the middle fits about as well; the
+ * tracker's windows, all centred near that crossing, cannot see the
+ * difference (their lag is e_p - c e_r, near 0), and its filter, fed the
+ * same frames every tick, grows sure of the line. A fit over all the
+ * music since is one estimate from more of it: where it correlates better
+ * than the tracker's line by half a cue lock's lead, and lies more than
+ * a tick from it somewhere over the fit (less is within what either line
+ * can tell: the fit's rate is on a grid, its peak wanders by some tenths
+ * of a tick), the tracker starts again from it, as at the lock. With onsets the onset feature fits and scores (where the window
+ * has onsets), as it places the tracker's peak. */
+static void cue_refine(mar_follow *f)
+{
+    size_t ages = (size_t)(f->t + 1 - f->cue_onset);
+    if (f->cue_fits >= CUE_FITS || ages > f->tk.window || f->seg_start > f->cue_onset) {
+        f->cue_refine = 0;      /* the tracker's window holds it all, or the music since is not one line */
+        return;
+    }
+    if (ages < f->tk.cue_fit_at[f->cue_fits])
+        return;
+    f->cue_fits++;
+    double r, d, kappa;
+    double fit = line_fit(f, ages, &r, &d, &kappa);
+    if (!(fit >= f->opt.track_threshold) || !lockable_peak(f, fit, kappa))
+        return;                                                 /* no clear line: the tracker's stays */
+    int ch = 0;
+    if (f->onsets) {
+        double r2, d2, kappa2;
+        if (line_fit_ch(f, 1, ages, &r2, &d2, &kappa2) >= f->opt.track_threshold && kappa2 > 0.0)
+            ch = 1, r = r2, d = d2;
+    }
+    double line_now = f->cue_from + r * ((double)ages - 0.5) + d;       /* [stored ticks] */
+    double apart_now = line_now - f->kf.p, apart_onset = apart_now - (r - f->kf.r) * (double)ages;
+    double lead = fisher(line_score(f, ch, line_now, r, ages))
+                - fisher(line_score(f, ch, f->kf.p, f->kf.r, ages));
+    if (fmax(fabs(apart_now), fabs(apart_onset)) > 1.0 && lead >= CUE_PRIOR * lock_lead(f, ages)) {
+        f->kf.p = line_now;
+        f->kf.r = r;
+        double rate_sd = 1.0 / (double)ages;                    /* a tick over the fit [1] */
+        mar_kf_init(&f->kf, 0.25, rate_sd * rate_sd);
     }
 }
 
@@ -2202,6 +2264,8 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
             follow(f, have, &flags);
         if (f->cue_pending && f->cue_fits < CUE_FITS && f->state != MAR_FOLLOW_PAUSED)
             cue_fit(f, &flags);
+        else if (f->cue_refine && f->state == MAR_FOLLOW_LOCKED && !f->doubt && !f->probation)
+            cue_refine(f);
     }
 
     /* 3. the searches, when not locked or in doubt */

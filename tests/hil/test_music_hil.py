@@ -16,10 +16,9 @@ from test_serial_hil import SIM_PRIORITY, play
 TICKS = 400             # 8 s
 
 
-@pytest.mark.xfail(strict=False, reason="flaky, before 2026-12-01 too (1 of 5 runs fail on dce2b5a, "
-                   "1 of 5 on this code; CI failed on it twice): the lock on node frames (loudness "
-                   "only) lands 1-2 ticks off in some runs and the locked tracker corrects it "
-                   "slowly; docs/music.md, known limits")
+@pytest.mark.xfail(strict=False, reason="flaky: a SYNC that reaches the simulator late makes the "
+                   "node measure the wrong audio (2 of 22 runs after the cue refit of 2026-12-02; "
+                   "the lock 1-2 ticks off, the first cause, is fixed); docs/music.md, known limits")
 def test_follows_music_measured_by_a_node(sim, figure, tmp_path):
     # the node measures the tick period before each SYNC and answers with
     # it; the engine takes it at the next tick, one period after that
