@@ -113,10 +113,10 @@ class Simulator:
         line = self.proc.stdout.readline() if ready else ""
         if not line:
             raise MarionetteError("demo: the simulator " + ("ended" if ready else
-                                  f"did not answer within {timeout:g} s") + self._stderr())
+                                  f"did not answer within {timeout:g} s") + self.stderr_text())
         return json.loads(line)
 
-    def _stderr(self) -> str:
+    def stderr_text(self) -> str:
         self.log.flush()
         self.log.seek(0)
         text = self.log.read().strip()
@@ -212,7 +212,7 @@ def _demo(args) -> int:
                     summary = sim.close()
                     for line in summary_lines(summary, sim.pid):
                         print(line, flush=True)
-                    text = sim._stderr()
+                    text = sim.stderr_text()
                     if text:
                         print(f"  simulator's stderr{text}", file=sys.stderr, flush=True)
     return status if summary is not None else (status or 1)
