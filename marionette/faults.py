@@ -67,13 +67,11 @@ class FaultWatcher:
             new, gone = snap.flags & ~before, before & ~snap.flags
             before = snap.flags
             at = f"tick {snap.tick} ({snap.tick * self.period:.2f} s)"
-            if new & _core.FLAG_LINK_LOST:
-                self._say(f"the link to the servo nodes is gone (the tick's write() failed for good) "
-                          f"at {at}: every node silent: silent_node = {self.reaction}: "
-                          f"{REACTIONS[self.reaction]}")
-            elif new & _core.FLAG_NODE_SILENT:
-                self._say(f"{silent_names(self.engine)} silent at {at}: silent_node = "
-                          f"{self.reaction}: {REACTIONS[self.reaction]}")
+            if new & _core.FLAG_NODE_SILENT:
+                who = ("the link to the servo nodes is gone (the tick's write() failed for good) "
+                       f"at {at}: every node silent" if new & _core.FLAG_LINK_LOST
+                       else f"{silent_names(self.engine)} silent at {at}")
+                self._say(f"{who}: silent_node = {self.reaction}: {REACTIONS[self.reaction]}")
             if new & _core.FLAG_OVERRUNS:
                 self._say(f"{self.engine.stats()['overruns']} real-time overruns at {at} (threshold "
                           f"{self.engine.config.faults.overruns}): every axis to rest at its "

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -22,13 +23,14 @@ SIM_PRIORITY = 30
 KILL_AT = 2.5               # into the show [s]
 
 
-def start_play(tmp_path, figure, pty, seed):
+def start_play(tmp_path, figure, pty, seed, extra=()):
     show = dance_from_home(figure, 8.0, seed=seed, fraction=0.5)
     path = tmp_path / "dance.npz"
     show.save(path)
     flight = tmp_path / "flight.bin"
     proc = subprocess.Popen([sys.executable, "-m", "marionette.cli", "play", str(path), "--realtime",
-                             "--priority", "0", "--link", f"serial:{pty}", "--record", str(flight)],
+                             "--priority", "0", "--link", f"serial:{pty}", "--record", str(flight),
+                             *map(str, extra)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=tempfile.gettempdir())
     return proc, flight, show.n_ticks
@@ -121,3 +123,58 @@ def test_one_silent_node_stops_every_axis_by_default(sim, figure, tmp_path):
     assert f"marionette: node 3 (no STATUS after tick {missed - 1}) silent at tick {tick}" in err, err
     print(f"silenced: reaction {int(records['tick'][first]) - missed} ticks after the first missed SYNC, "
           f"at rest {rest * figure.tick_period:.2f} s later (limits allow {allowed:.2f} s)")
+
+
+def figure_with_faults(figure, tmp_path, silent_node):
+    path = tmp_path / "figure.toml"
+    path.write_text(Path(figure.source).read_text() + f'\n[faults]\nsilent_node = "{silent_node}"\n')
+    return path
+
+
+def test_hold_waits_for_the_silent_node_then_blends_back_in(sim, figure, tmp_path):
+    """silent_node = "hold": stand while node 3 is silent, play on when it answers again."""
+    s = sim("--serial", "--priority", SIM_PRIORITY)
+    config = figure_with_faults(figure, tmp_path, "hold")
+    proc, flight, n_ticks = start_play(tmp_path, figure, s.ready["serial"], seed=33, extra=("--config", config))
+    try:
+        wait_for_ticks(flight, int(KILL_AT / figure.tick_period))
+        assert s.control("silence 3") == {"ok": "node 3 silenced"}
+        time.sleep(1.0)
+        assert s.control("resume 3")["ok"]
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    s.quit()
+    assert proc.returncode == 0, (out, err)     # the show ended playing, every node answering
+    _, records = read_flight_record(flight)
+    flags = records["flags"]
+    held = np.nonzero(flags & _core.FLAG_FAULT_HOLD)[0]
+    assert len(held) > 0.5 / figure.tick_period and np.all(np.diff(held) == 1)
+    assert np.all(flags[held] & _core.FLAG_NODE_SILENT)
+    assert np.ptp(records["position"][held]) == 0                     # the clock waited
+    assert flags[held[-1] + 1] & _core.FLAG_MOVING                     # the blend back in
+    assert len(records) >= n_ticks - 1 and not np.any(flags[held[-1] + 1:] & _core.FLAG_NODE_SILENT)
+    assert "silent_node = hold" in err and "every node answers again" in err and \
+        "blending back into the show" in err, err
+    assert "the show ended on a fault" not in out
+
+
+def test_estop_sends_the_nodes_estop(sim, figure, tmp_path):
+    s = sim("--serial", "--priority", SIM_PRIORITY)
+    config = figure_with_faults(figure, tmp_path, "estop")
+    proc, flight, _ = start_play(tmp_path, figure, s.ready["serial"], seed=34, extra=("--config", config))
+    try:
+        wait_for_ticks(flight, int(KILL_AT / figure.tick_period))
+        assert s.control("silence 3") == {"ok": "node 3 silenced"}
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    s.quit()
+    assert proc.returncode == 1, (out, err)
+    _, records = read_flight_record(flight)
+    assert np.any(records["flags"] & _core.FLAG_FAULT_STOP)
+    # the others answered latched: play's summary shows their e-stop flag (0x10)
+    for node in (1, 2, 4, 5):
+        line = next(x for x in out.splitlines() if x.strip().startswith(f"node {node}:"))
+        assert int(line.split("flags 0x")[1][:2], 16) & 0x10, line
+    assert "silent_node = estop: ESTOP to the nodes" in err
