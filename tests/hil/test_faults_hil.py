@@ -49,6 +49,31 @@ def wait_for_ticks(flight, ticks, timeout=20.0):
     raise AssertionError(f"{flight}: fewer than {ticks} records after {timeout} s")
 
 
+def play_with_fault(sim, figure, tmp_path, seed, fault, silent_node=None):
+    """`play` of an 8 s dance against a simulator; fault(simulator) at KILL_AT
+    into it. Returns (exit status, stdout, stderr, flight record path, records, show ticks)."""
+    s = sim("--serial", "--priority", SIM_PRIORITY)
+    extra = ()
+    if silent_node is not None:
+        config = tmp_path / "figure.toml"
+        config.write_text(Path(figure.source).read_text() + f'\n[faults]\nsilent_node = "{silent_node}"\n')
+        extra = ("--config", config)
+    proc, flight, n_ticks = start_play(tmp_path, figure, s.ready["serial"], seed, extra)
+    try:
+        wait_for_ticks(flight, int(KILL_AT / figure.tick_period))
+        fault(s)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    if s.proc.poll() is None:
+        s.quit()
+    return proc.returncode, out, err, flight, read_flight_record(flight)[1], n_ticks
+
+
+def silence_3(s):
+    assert s.control("silence 3") == {"ok": "node 3 silenced"}
+
+
 def check_reaction(figure, records, first, n_ticks):
     """From record first on: flagged, braking at the limits to rest, held."""
     flags = records["flags"]
@@ -70,17 +95,14 @@ def check_reaction(figure, records, first, n_ticks):
 
 
 def test_killing_the_simulator_mid_show_stops_the_figure_and_exits_1(sim, figure, tmp_path):
-    s = sim("--serial", "--priority", SIM_PRIORITY)
-    proc, flight, n_ticks = start_play(tmp_path, figure, s.ready["serial"], seed=31)
-    try:
-        wait_for_ticks(flight, int(KILL_AT / figure.tick_period))
-        killed_ns = time.monotonic_ns()
+    killed = []
+
+    def kill(s):
+        killed.append(time.monotonic_ns())
         s.kill()                                        # SIGKILL: no goodbye to the link
-        out, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    assert proc.returncode == 1, (out, err)
-    _, records = read_flight_record(flight)
+    status, out, err, _, records, n_ticks = play_with_fault(sim, figure, tmp_path, 31, kill)
+    killed_ns = killed[0]
+    assert status == 1, (out, err)
     first = int(np.argmax((records["flags"] & _core.FLAG_NODE_SILENT) != 0))
     # the pty's far end closed: the tick's own write() fails (EIO) and the
     # next tick reacts, without waiting for the nodes' silence to show
@@ -98,17 +120,8 @@ def test_killing_the_simulator_mid_show_stops_the_figure_and_exits_1(sim, figure
 
 
 def test_one_silent_node_stops_every_axis_by_default(sim, figure, tmp_path):
-    s = sim("--serial", "--priority", SIM_PRIORITY)
-    proc, flight, n_ticks = start_play(tmp_path, figure, s.ready["serial"], seed=32)
-    try:
-        wait_for_ticks(flight, int(KILL_AT / figure.tick_period))
-        assert s.control("silence 3") == {"ok": "node 3 silenced"}
-        out, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    s.quit()
-    assert proc.returncode == 1, (out, err)
-    _, records = read_flight_record(flight)
+    status, out, err, flight, records, n_ticks = play_with_fault(sim, figure, tmp_path, 32, silence_3)
+    assert status == 1, (out, err)
     first = int(np.argmax((records["flags"] & _core.FLAG_NODE_SILENT) != 0))
     assert not records["flags"][first] & _core.FLAG_LINK_LOST
     bit = 1 << sorted({a.node for a in figure.axes}).index(3)
@@ -125,28 +138,15 @@ def test_one_silent_node_stops_every_axis_by_default(sim, figure, tmp_path):
           f"at rest {rest * figure.tick_period:.2f} s later (limits allow {allowed:.2f} s)")
 
 
-def figure_with_faults(figure, tmp_path, silent_node):
-    path = tmp_path / "figure.toml"
-    path.write_text(Path(figure.source).read_text() + f'\n[faults]\nsilent_node = "{silent_node}"\n')
-    return path
-
-
 def test_hold_waits_for_the_silent_node_then_blends_back_in(sim, figure, tmp_path):
     """silent_node = "hold": stand while node 3 is silent, play on when it answers again."""
-    s = sim("--serial", "--priority", SIM_PRIORITY)
-    config = figure_with_faults(figure, tmp_path, "hold")
-    proc, flight, n_ticks = start_play(tmp_path, figure, s.ready["serial"], seed=33, extra=("--config", config))
-    try:
-        wait_for_ticks(flight, int(KILL_AT / figure.tick_period))
-        assert s.control("silence 3") == {"ok": "node 3 silenced"}
+    def silence_then_resume(s):
+        silence_3(s)
         time.sleep(1.0)
         assert s.control("resume 3")["ok"]
-        out, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    s.quit()
-    assert proc.returncode == 0, (out, err)     # the show ended playing, every node answering
-    _, records = read_flight_record(flight)
+    status, out, err, _, records, n_ticks = play_with_fault(sim, figure, tmp_path, 33, silence_then_resume,
+                                                            silent_node="hold")
+    assert status == 0, (out, err)              # the show ended playing, every node answering
     flags = records["flags"]
     held = np.nonzero(flags & _core.FLAG_FAULT_HOLD)[0]
     assert len(held) > 0.5 / figure.tick_period and np.all(np.diff(held) == 1)
@@ -160,18 +160,8 @@ def test_hold_waits_for_the_silent_node_then_blends_back_in(sim, figure, tmp_pat
 
 
 def test_estop_sends_the_nodes_estop(sim, figure, tmp_path):
-    s = sim("--serial", "--priority", SIM_PRIORITY)
-    config = figure_with_faults(figure, tmp_path, "estop")
-    proc, flight, _ = start_play(tmp_path, figure, s.ready["serial"], seed=34, extra=("--config", config))
-    try:
-        wait_for_ticks(flight, int(KILL_AT / figure.tick_period))
-        assert s.control("silence 3") == {"ok": "node 3 silenced"}
-        out, err = proc.communicate(timeout=60)
-    finally:
-        proc.kill()
-    s.quit()
-    assert proc.returncode == 1, (out, err)
-    _, records = read_flight_record(flight)
+    status, out, err, _, records, _ = play_with_fault(sim, figure, tmp_path, 34, silence_3, silent_node="estop")
+    assert status == 1, (out, err)
     assert np.any(records["flags"] & _core.FLAG_FAULT_STOP)
     # the others answered latched: play's summary shows their e-stop flag (0x10)
     for node in (1, 2, 4, 5):
