@@ -45,6 +45,9 @@ class FaultWatcher:
         self._thread: threading.Thread | None = None
 
     def start(self) -> FaultWatcher:
+        """Watches only where a fault can come: a link to nodes, or an overrun threshold."""
+        if self.engine.supervisor is None and not self.engine.config.faults.overruns:
+            return self
         self._thread = threading.Thread(target=self._run, name="marionette-faults", daemon=True)
         self._thread.start()
         return self
@@ -61,12 +64,13 @@ class FaultWatcher:
     def _run(self) -> None:
         before = 0
         while not self._stop.wait(self.period / 2):
-            snap = self.engine.snapshot()
-            if snap is None:
+            rec = self.engine._core.snapshot()      # the raw record: cheap, polled every half tick
+            if rec is None:
                 continue
-            new, gone = snap.flags & ~before, before & ~snap.flags
-            before = snap.flags
-            at = f"tick {snap.tick} ({snap.tick * self.period:.2f} s)"
+            flags, tick = int(rec["flags"]), int(rec["tick"])
+            new, gone = flags & ~before, before & ~flags
+            before = flags
+            at = f"tick {tick} ({tick * self.period:.2f} s)"
             if new & _core.FLAG_NODE_SILENT:
                 who = ("the link to the servo nodes is gone (the tick's write() failed for good) "
                        f"at {at}: every node silent" if new & _core.FLAG_LINK_LOST
