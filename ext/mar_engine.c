@@ -32,6 +32,8 @@ struct mar_engine {
                                      * or a seek after the source was lost: blend there */
     int source_lost;                /* latched: the live source was lost (MAR_FLAG_SOURCE_LOST) */
     double held_at;                 /* on hold: the position when following was lost [show ticks] */
+    uint32_t fault;                 /* latched MAR_FLAG_FAULT_STOP | MAR_FLAG_OVERRUNS, or
+                                     * MAR_FLAG_FAULT_HOLD while held for a silent node */
     int64_t tick;
     uint64_t bad_input_seen;        /* bad_input at the previous tick */
     int mode;                       /* enum mar_mode */
@@ -57,6 +59,7 @@ struct mar_engine {
 
     _Atomic uint64_t ticks, overruns, limited, bad_input;
     _Atomic uint32_t node_alarms;
+    _Atomic uint32_t silent_nodes;
     _Atomic int running;            /* real-time loop owns the tick */
 
     mar_ring records;               /* flight recorder */
@@ -100,6 +103,8 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
     if (opt->interp != MAR_INTERP_LINEAR && opt->interp != MAR_INTERP_CUBIC)
         return NULL;
     if (opt->follow && opt->follow_on_lost != MAR_ON_LOST_FLYWHEEL && opt->follow_on_lost != MAR_ON_LOST_HOLD)
+        return NULL;
+    if (opt->on_silent_node < MAR_FAULT_CONTINUE || opt->on_silent_node > MAR_FAULT_ESTOP)
         return NULL;
     for (size_t j = 0; j < n_axes; j++) {
         int r = check_axis(&axes[j]);
@@ -322,6 +327,31 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
     e->move_duration = longest;
 }
 
+/* The fault reactions, after the operator's request of this tick (a fault
+ * overrides it): a silent node (on_silent_node) or the overrun threshold.
+ * STOP, ESTOP and the overruns plan the stop ramp once and latch; HOLD
+ * plans it when a node falls silent and blends back into the show at the
+ * playback position when every node answers again. Returns the fault flags. */
+static uint32_t react_to_faults(mar_engine *e, uint32_t silent)
+{
+    if (e->fault & MAR_FLAG_FAULT_STOP)
+        return e->fault;
+    uint64_t limit = e->opt.max_overruns;
+    int overrun = limit > 0 && atomic_load_explicit(&e->overruns, memory_order_relaxed) >= limit;
+    int reaction = e->opt.on_silent_node;
+    if (overrun || (silent && (reaction == MAR_FAULT_STOP || reaction == MAR_FAULT_ESTOP))) {
+        e->fault = MAR_FLAG_FAULT_STOP | (overrun ? MAR_FLAG_OVERRUNS : 0u);
+        plan_moves(e, MAR_REQ_STOP, 0, e->position);
+    } else if (reaction == MAR_FAULT_HOLD && silent && !e->fault) {
+        e->fault = MAR_FLAG_FAULT_HOLD;
+        plan_moves(e, MAR_REQ_STOP, 0, e->position);
+    } else if (e->fault == MAR_FLAG_FAULT_HOLD && !silent) {
+        e->fault = 0;
+        plan_moves(e, MAR_REQ_BLEND, 1, e->position);
+    }
+    return e->fault;
+}
+
 /* Take a new move request, if one came, and plan the moves. */
 static void take_request(mar_engine *e)
 {
@@ -374,6 +404,12 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         flags |= MAR_FLAG_BAD_INPUT;
     }
     take_request(e);
+    uint32_t silent = atomic_load_explicit(&e->silent_nodes, memory_order_relaxed);
+    if (atomic_load_explicit(&e->sink.gone, memory_order_relaxed)) {
+        flags |= MAR_FLAG_LINK_LOST;    /* the previous tick's write() found the link gone */
+        silent = ~0u;
+    }
+    flags |= react_to_faults(e, silent) | (silent ? MAR_FLAG_NODE_SILENT : 0u);
     int jump = (e->follow_out.flags & MAR_FOLLOW_F_JUMP) && !e->source_lost;
     if (e->follow && (jump || e->rejoin) && e->mode == MAR_MODE_SHOW) {
         /* the music's position jumped (lock, re-lock, resume, or the end of
@@ -492,9 +528,10 @@ int mar_engine_push_frame(mar_engine *e, double value, double onset)
     return mar_ring_push(&e->loudness_in, &frame, sizeof frame);
 }
 
-void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask)
+void mar_engine_set_node_alarms(mar_engine *e, uint32_t alarms, uint32_t silent)
 {
-    atomic_store_explicit(&e->node_alarms, mask, memory_order_relaxed);
+    atomic_store_explicit(&e->node_alarms, alarms | silent, memory_order_relaxed);
+    atomic_store_explicit(&e->silent_nodes, silent, memory_order_relaxed);
 }
 
 void mar_engine_source_lost(mar_engine *e)

@@ -33,6 +33,17 @@ enum mar_on_lost {
                                  * follower has a place again; then blend there */
 };
 
+/* What the tick does when a servo node falls silent (the silent mask of
+ * mar_engine_set_node_alarms; the figure's [faults] silent_node). */
+enum mar_fault_reaction {
+    MAR_FAULT_CONTINUE = 0,     /* play on; the records say so (MAR_FLAG_NODE_SILENT) */
+    MAR_FAULT_STOP = 1,         /* every axis to rest at its acceleration limit (the stop ramp), then
+                                 * hold; latched: the show does not resume (MAR_FLAG_FAULT_STOP) */
+    MAR_FAULT_HOLD = 2,         /* the same ramp, the playback clock waits; when every node answers
+                                 * again, a blend back into the show where it stopped (MAR_FLAG_FAULT_HOLD) */
+    MAR_FAULT_ESTOP = 3,        /* as STOP in the tick; the host also sends the nodes ESTOP (they latch) */
+};
+
 /* One axis: behaviour model, limits, addressing. */
 typedef struct {
     mar_limits limits;
@@ -53,6 +64,8 @@ typedef struct {
     mar_follow_options follow_opt;  /* used when follow is 1 */
     double follow_cue;          /* where the live music starts [show ticks] (mar_follow_cue); NaN: unknown */
     int follow_on_lost;         /* enum mar_on_lost, used when follow is 1 (0: flywheel) */
+    int on_silent_node;         /* enum mar_fault_reaction (0: continue) */
+    uint64_t max_overruns;      /* this many real-time overruns stop the show (latched); 0: never */
 } mar_engine_options;
 
 /* Who drives the commands. */
@@ -77,6 +90,14 @@ enum mar_request {
 #define MAR_FLAG_HOLDING  16u   /* the figure holds a pose */
 #define MAR_FLAG_UNFOLLOWED 32u /* the music is not followed: the follower searches after it had a place */
 #define MAR_FLAG_SOURCE_LOST 64u /* the live music's source was lost (mar_engine_source_lost); latched */
+#define MAR_FLAG_NODE_SILENT 128u /* a servo node is silent this tick (the silent mask is not 0) */
+#define MAR_FLAG_FAULT_STOP 256u /* a fault stopped the show (a silent node with STOP or ESTOP, or the
+                                  * overrun threshold): the stop ramp, then hold; latched to the end */
+#define MAR_FLAG_FAULT_HOLD 512u /* the show holds for a silent node (MAR_FAULT_HOLD) until every node answers */
+#define MAR_FLAG_OVERRUNS 1024u /* the real-time overruns reached max_overruns (then also FAULT_STOP); latched */
+#define MAR_FLAG_LINK_LOST 2048u /* the setpoints' descriptor is gone (write() failed for good, e.g. EIO: the
+                                  * pty's other end closed, a USB adapter unplugged): every node counts as
+                                  * silent from the next tick on (also MAR_FLAG_NODE_SILENT); latched */
 
 /* A flight-recorder record, followed in memory by n_axes commands [unit]. */
 typedef struct {
@@ -128,7 +149,11 @@ int mar_engine_seek(mar_engine *e, double position);      /* [show ticks] */
 int mar_engine_push_loudness(mar_engine *e, double value);   /* one 20 ms frame, >= 0 */
 /* The same with the frame's onset strength [dB] (>= 0; NaN: the source has none) */
 int mar_engine_push_frame(mar_engine *e, double value, double onset);
-void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask); /* copied into every record */
+/* alarms: bit i, the i-th node is silent or faulted (copied into every
+ * record's node_alarms); silent: the nodes among them that are silent. The
+ * next tick applies on_silent_node when silent is not 0 (or when the sink's
+ * descriptor is gone: MAR_FLAG_LINK_LOST, found by the tick itself). */
+void mar_engine_set_node_alarms(mar_engine *e, uint32_t alarms, uint32_t silent);
 /* The live music's source is lost (a sound card's stream failed or went
  * silent). Latched from the next tick to the end: every record carries
  * MAR_FLAG_SOURCE_LOST, and with a follower the music is not followed from

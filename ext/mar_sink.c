@@ -167,6 +167,14 @@ int32_t mar_counts(const mar_axis_address *a, double position)
     return (int32_t)c;
 }
 
+/* A write() error that no later write() will cure: the device, the pty's
+ * other end or the connection is gone (a full buffer, EAGAIN or ENOBUFS, is not). */
+static int receiver_gone(int err)
+{
+    return err == EIO || err == ENXIO || err == ENODEV || err == EBADF || err == EPIPE
+        || err == ECONNRESET || err == ENOTCONN || err == ENETDOWN;
+}
+
 /* The tick's bytes to the descriptor: one write for serial, one per record
  * for CAN (a SocketCAN socket takes one frame per write). 1 if all went. */
 static int write_out(mar_sink *s, size_t len)
@@ -179,8 +187,11 @@ static int write_out(mar_sink *s, size_t len)
             atomic_fetch_add_explicit(&s->bytes, (uint64_t)w, memory_order_relaxed);
         if (w != (ssize_t)step) {
             all = 0;
-            if (w < 0 && errno != EAGAIN)   /* the receiver is gone: no use trying the rest */
+            if (w < 0 && errno != EAGAIN) { /* the receiver is gone: no use trying the rest */
+                if (receiver_gone(errno))
+                    atomic_store_explicit(&s->gone, errno, memory_order_relaxed);
                 break;
+            }
         }
     }
     return all;

@@ -75,6 +75,8 @@ struct mar_sink {
     _Atomic uint64_t frames;    /* ticks emitted in full */
     _Atomic uint64_t errors;    /* ticks lost: short write, full ring, codec error */
     _Atomic uint64_t bytes;     /* bytes handed on */
+    _Atomic int gone;           /* the errno of a write() that says the receiver is gone for good
+                                 * (EIO, ENXIO, ENODEV, EBADF, EPIPE, ...; not a full buffer); latched */
 };
 
 /* Largest tick for n axes [bytes], whichever protocol. */

@@ -65,6 +65,16 @@ cdef extern from "mar_follow.h" nogil:
 cdef extern from "mar_engine.h" nogil:
     enum:
         MAR_FLAG_SOURCE_LOST
+        MAR_FLAG_NODE_SILENT
+        MAR_FLAG_FAULT_STOP
+        MAR_FLAG_FAULT_HOLD
+        MAR_FLAG_OVERRUNS
+        MAR_FLAG_LINK_LOST
+    enum mar_fault_reaction:
+        MAR_FAULT_CONTINUE
+        MAR_FAULT_STOP
+        MAR_FAULT_HOLD
+        MAR_FAULT_ESTOP
     ctypedef struct mar_axis:
         mar_limits limits
         double dead_time
@@ -82,6 +92,8 @@ cdef extern from "mar_engine.h" nogil:
         mar_follow_options follow_opt
         double follow_cue
         int follow_on_lost
+        int on_silent_node
+        uint64_t max_overruns
     ctypedef struct mar_record:
         int64_t tick
         int64_t time_ns
@@ -115,7 +127,7 @@ cdef extern from "mar_engine.h" nogil:
     int mar_engine_seek(mar_engine *e, double position)
     int mar_engine_push_loudness(mar_engine *e, double value)
     int mar_engine_push_frame(mar_engine *e, double value, double onset)
-    void mar_engine_set_node_alarms(mar_engine *e, uint32_t mask)
+    void mar_engine_set_node_alarms(mar_engine *e, uint32_t alarms, uint32_t silent)
     void mar_engine_source_lost(mar_engine *e)
     int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized)
     int mar_engine_snapshot(const mar_engine *e, mar_record *rec, double *commands)

@@ -34,6 +34,15 @@ FLAG_MOVING = 8
 FLAG_HOLDING = 16
 FLAG_UNFOLLOWED = 32    # the music is not followed: the follower searches after it had a place
 FLAG_SOURCE_LOST = MAR_FLAG_SOURCE_LOST   # the live source was lost (Engine.source_lost), latched
+FLAG_NODE_SILENT = MAR_FLAG_NODE_SILENT   # a servo node is silent this tick
+FLAG_FAULT_STOP = MAR_FLAG_FAULT_STOP     # a fault stopped the show (stop ramp, then hold), latched
+FLAG_FAULT_HOLD = MAR_FLAG_FAULT_HOLD     # the show holds for a silent node until every node answers
+FLAG_OVERRUNS = MAR_FLAG_OVERRUNS         # the overrun threshold was reached (with FAULT_STOP), latched
+FLAG_LINK_LOST = MAR_FLAG_LINK_LOST       # the setpoints' descriptor is gone (EIO...): every node silent, latched
+FAULT_CONTINUE = MAR_FAULT_CONTINUE       # enum mar_fault_reaction: [faults] silent_node
+FAULT_STOP = MAR_FAULT_STOP
+FAULT_HOLD = MAR_FAULT_HOLD
+FAULT_ESTOP = MAR_FAULT_ESTOP
 ON_LOST_FLYWHEEL = 0    # enum mar_on_lost
 ON_LOST_HOLD = 1
 REQUEST_GOTO = 1        # enum mar_request
@@ -76,13 +85,15 @@ cdef class CoreEngine:
                   cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] loudness,
                   size_t record_slots, size_t loudness_slots, bint start_holding=False,
                   bytes follow_options=None, onsets=None, double follow_cue=NAN,
-                  int follow_on_lost=ON_LOST_FLYWHEEL):
+                  int follow_on_lost=ON_LOST_FLYWHEEL, int on_silent_node=MAR_FAULT_CONTINUE,
+                  uint64_t max_overruns=0):
         """follow_options: a filled mar_follow_options (marionette._follow.options_bytes),
         or None to let the rate drive the playback clock; onsets: the stored
         onset strength (ticks,) [dB] for the follower, or None; follow_cue:
         where the live music starts [show ticks], NaN: unknown; follow_on_lost:
         ON_LOST_FLYWHEEL or ON_LOST_HOLD, what the show does while the music is
-        not followed."""
+        not followed; on_silent_node: FAULT_*, the reaction to a silent node;
+        max_overruns: real-time overruns that stop the show (0: none)."""
         axes = np.ascontiguousarray(axes, dtype=AXIS_DTYPE)
         cdef size_t n_axes = axes.shape[0]
         if show.shape[0] != n_axes or loudness.shape[0] != show.shape[1]:
@@ -119,6 +130,8 @@ cdef class CoreEngine:
         opt.follow = follow_options is not None
         opt.follow_cue = follow_cue
         opt.follow_on_lost = follow_on_lost
+        opt.on_silent_node = on_silent_node
+        opt.max_overruns = max_overruns
         if opt.follow:
             if len(follow_options) != sizeof(mar_follow_options):
                 free(c_axes)
@@ -187,8 +200,9 @@ cdef class CoreEngine:
     def push_loudness(self, double value, double onset=NAN):
         return mar_engine_push_frame(self.engine, value, onset)
 
-    def set_node_alarms(self, uint32_t mask):
-        mar_engine_set_node_alarms(self.engine, mask)
+    def set_node_alarms(self, uint32_t alarms, uint32_t silent=0):
+        """alarms: nodes silent or faulted (bit i: the i-th node); silent: those silent."""
+        mar_engine_set_node_alarms(self.engine, alarms, silent)
 
     def source_lost(self):
         """The live source is lost: latched from the next tick (FLAG_SOURCE_LOST)."""

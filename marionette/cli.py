@@ -20,6 +20,7 @@ from marionette.console import open_view
 from marionette.demo import DEMO_SHOW
 from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
+from marionette.faults import FaultWatcher, summary as fault_summary
 from marionette.music.report import (LostWatcher, choose_latency, follow_share, lost_events,
                                      never_locked_warning, recording_warnings, share_line,
                                      verdict_line)
@@ -115,12 +116,14 @@ def cmd_play(args) -> int:
             if args.realtime:
                 engine.start(priority=args.priority, cpu=args.cpu, lock_memory=args.lock_memory,
                              max_ticks=n)
+                faults = FaultWatcher(engine, period).start()     # [faults]: told at once
                 if follow:
                     watcher = LostWatcher(engine, period, on_lost).start()
                 if live is not None:
                     live.start()
                 view.wait()
                 engine.stop()
+                faults.stop()
                 if watcher is not None:
                     watcher.stop()
             elif live is not None:       # tick k has heard frame k - 1, as in sync-sim
@@ -192,7 +195,9 @@ def cmd_play(args) -> int:
         speed = np.max(np.abs(np.diff(cmd[:, j]))) / period if len(cmd) > 1 else 0.0
         print(f"  {axis.name:<18}{axis.unit:>5}{cmd[:, j].min():>10.4f}{cmd[:, j].max():>10.4f}"
               f"{speed:>11.4f}{axis.max_speed:>9.3g}")
-    status = 0
+    fault_lines, status = fault_summary(records, config, stats["overruns"])
+    for line in fault_lines:
+        print(line)
     if audio is not None:
         audio_latency = "-" if audio.latency is None else f"{audio.latency * 1e3:.0f} ms"
         print(f"  audio input {audio.name!r}: {audio.frames} frames, input latency {audio_latency}, "

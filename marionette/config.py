@@ -79,6 +79,25 @@ def _follow_config_class():
 FollowConfig = _follow_config_class()
 
 
+SILENT_NODE = ("stop", "hold", "estop", "continue")   # [faults] silent_node
+MAX_OVERRUNS = 1_000_000
+
+
+@dataclass(frozen=True)
+class FaultConfig:
+    """Fault reactions (the optional [faults] table, docs/formats.md).
+
+    silent_node: what the show does when a servo node falls silent: "stop"
+    (default: every axis to rest at its limits, held, latched), "hold" (the
+    same, then back into the show when every node answers again), "estop"
+    (as stop, and the nodes are sent ESTOP) or "continue" (play on).
+    overruns: this many real-time overruns stop the show as "stop" does
+    (0, the default: none do; they are counted anyway)."""
+
+    silent_node: str = "stop"
+    overruns: int = 0
+
+
 @dataclass(frozen=True)
 class FigureConfig:
     """A figure: its axes in order, the tick period, where it came from."""
@@ -88,6 +107,7 @@ class FigureConfig:
     axes: tuple[AxisConfig, ...]
     source: str = "<memory>"        # file it was read from
     follow: FollowConfig = field(default_factory=FollowConfig)  # music following
+    faults: FaultConfig = field(default_factory=FaultConfig)    # fault reactions
 
     @property
     def axis_names(self) -> list[str]:
@@ -198,15 +218,35 @@ def _follow_table(src: str, table) -> FollowConfig:
     return FollowConfig(**values)
 
 
+def _faults_table(src: str, table) -> FaultConfig:
+    """The optional [faults] table; defaults for what it leaves out."""
+    if not isinstance(table, dict):
+        raise ConfigError(f"{src}: [faults] must be a table")
+    known = {f.name for f in fields(FaultConfig)}
+    values = {}
+    for key, value in table.items():
+        if key not in known:
+            raise ConfigError(f"{src}: faults.{key} = {value!r} is not a known key "
+                              f"(known: {', '.join(sorted(known))})")
+        if key == "silent_node":
+            if value not in SILENT_NODE:
+                raise ConfigError(f"{src}: faults.silent_node = {value!r} is not known "
+                                  f"(use one of {SILENT_NODE})")
+            values[key] = value
+        else:
+            values[key] = _integer(src, f"faults.{key}", value, 0, MAX_OVERRUNS)
+    return FaultConfig(**values)
+
+
 def config_from_dict(data: dict, source: str = "<memory>") -> FigureConfig:
     """Validate a parsed TOML document; errors name source, key and value."""
     figure = data.get("figure", {})
     if not isinstance(figure, dict):
         raise ConfigError(f"{source}: [figure] must be a table")
-    unknown = set(data) - {"figure", "axis", "follow"}
+    unknown = set(data) - {"figure", "axis", "follow", "faults"}
     if unknown:
         raise ConfigError(f"{source}: unknown top-level key(s) {sorted(unknown)} "
-                          "(expected [figure], [[axis]] and optionally [follow])")
+                          "(expected [figure], [[axis]] and optionally [follow] and [faults])")
     unknown = set(figure) - {"name", "tick_period", "note"}
     if unknown:
         raise ConfigError(f"{source}: unknown key(s) {sorted(unknown)} in [figure]")
@@ -232,7 +272,8 @@ def config_from_dict(data: dict, source: str = "<memory>") -> FigureConfig:
                               f"node {a.node}, channel {a.channel}")
         addresses[key] = a.name
     return FigureConfig(name=str(figure.get("name", Path(source).stem)), tick_period=period,
-                        axes=axes, source=source, follow=_follow_table(source, data.get("follow", {})))
+                        axes=axes, source=source, follow=_follow_table(source, data.get("follow", {})),
+                        faults=_faults_table(source, data.get("faults", {})))
 
 
 def load_config(path: str | Path | None = None) -> FigureConfig:

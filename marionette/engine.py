@@ -37,6 +37,8 @@ LEAD_MODES = {"dead_time_lag": _core.LEAD_DEAD_TIME_LAG, "mean_delay": _core.LEA
 INTERPOLATIONS = {"cubic": _core.INTERP_CUBIC, "linear": _core.INTERP_LINEAR}
 PROTOCOLS = {"serial": _core.PROTOCOL_SERIAL, "can": _core.PROTOCOL_CAN}
 ON_LOST = {"flywheel": _core.ON_LOST_FLYWHEEL, "hold": _core.ON_LOST_HOLD}   # [follow] on_lost
+SILENT_NODE = {"stop": _core.FAULT_STOP, "hold": _core.FAULT_HOLD, "estop": _core.FAULT_ESTOP,
+               "continue": _core.FAULT_CONTINUE}                               # [faults] silent_node
 CAN_COUNTS_MAX = 524287  # int20 counts of a CAN setpoint PDO (firmware_protocol/SPEC.md)
 FOLLOW_STATES = dict(enumerate(_FOLLOW_STATE_NAMES))   # record follow_state -> name
 RECORD_SLOTS = 4096      # flight-recorder ring [ticks], 82 s at 20 ms
@@ -115,6 +117,11 @@ class Engine:
     their dead time and lag, then stops and tells the nodes (ESTOP, then
     ESTOP_RELEASE: they hold where they stand, PRE_OPERATIONAL, watchdog
     disarmed until the next setpoint), so no watchdog trips (wait()).
+    The figure's [faults] table sets what the tick does when a servo node
+    falls silent and how many real-time overruns stop the show (records'
+    FLAG_NODE_SILENT, FLAG_FAULT_STOP, FLAG_FAULT_HOLD, FLAG_OVERRUNS); a
+    fault that stops the show ends a run with an end action there, as the
+    end of the show would (wait()).
     """
 
     def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
@@ -154,7 +161,8 @@ class Engine:
             np.ascontiguousarray(self.show.loudness, dtype=np.float64),
             RECORD_SLOTS if record else 0, LOUDNESS_SLOTS, start_pose is not None,
             None if follow is None else follower_options(config, self.show, follow),
-            self.show.onsets if follow is not None else None, cue, ON_LOST[on_lost])
+            self.show.onsets if follow is not None else None, cue, ON_LOST[on_lost],
+            SILENT_NODE[config.faults.silent_node], config.faults.overruns)
         self._request_lock = threading.Lock()
         self.recorder = None
         if record:
@@ -286,12 +294,15 @@ class Engine:
                 if rec is not None and ready(rec):
                     return True
             return False
-        if not until(lambda rec: int(rec["tick"]) >= last_tick - 1):
+        def fault(rec) -> bool:         # a fault reaction stopped the show: it ends there
+            return bool(rec["flags"] & _core.FLAG_FAULT_STOP)
+        if not until(lambda rec: int(rec["tick"]) >= last_tick - 1 or fault(rec)):
             return
-        if self.end == "home":
-            self.home()
-        else:
-            self.stop_motion()
+        if not fault(self._core.snapshot()):
+            if self.end == "home":
+                self.home()
+            else:
+                self.stop_motion()
         seen = self._latest_tick()
         if not until(lambda rec: int(rec["tick"]) > seen + 1 and rec["flags"] & _core.FLAG_HOLDING):
             return
@@ -326,9 +337,13 @@ class Engine:
             if not self._rested.wait(timeout):
                 return False
             _raise_for(self._core.stop(), "stopping the real-time loop")
-            self.supervisor.estop()         # at rest: the quick stop moves nothing ...
-            time.sleep(2 * self.config.tick_period)
-            self.supervisor.release()       # ... and the release leaves the nodes holding
+            try:
+                self.supervisor.estop()     # at rest: the quick stop moves nothing ...
+                if not self.supervisor.estop_sent:  # (the "estop" fault reaction leaves them latched)
+                    time.sleep(2 * self.config.tick_period)
+                    self.supervisor.release()   # ... and the release leaves the nodes holding
+            except OSError:                 # the link is gone (its nodes' watchdogs stop them)
+                pass
             self._end_thread.join()
             self._end_thread = None
             return True

@@ -455,6 +455,118 @@ static void test_source_lost(void)
     mar_engine_destroy(e);
 }
 
+/* The fault reactions in the tick: a silent node (continue, stop, hold,
+ * estop), the overrun threshold and a vanished descriptor. From the tick
+ * after the news every record says so; a stop brakes every axis at its
+ * acceleration limit to rest inside its position limits and stays latched;
+ * a hold blends back in when the nodes answer; no tick allocates. */
+static void test_faults(void)
+{
+    enum { N = 400, AXES = 3, AT = 60, REC = 512 };
+    static double show[AXES * N], loud[N];
+    mar_axis axes[AXES];
+    for (int j = 0; j < AXES; j++) {
+        axes[j] = (mar_axis){ .limits = { -1, 1, 1.0 + j, 4.0 + 3 * j }, .start = 0,
+                              .address = { (uint8_t)(1 + j), 0, 100, 0 } };
+        for (int k = 0; k < N; k++)
+            show[j * N + k] = 0.5 * sin(3.141592653589793 * k * 0.02 + j);
+        axes[j].start = show[j * N];
+    }
+    for (int k = 0; k < N; k++)
+        loud[k] = 0;
+    for (int kind = 0; kind < 6; kind++) {      /* reactions 0..3, overruns, descriptor gone */
+        int reaction = kind <= MAR_FAULT_ESTOP ? kind : kind == 5 ? MAR_FAULT_STOP : MAR_FAULT_CONTINUE;
+        mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_NONE, .interp = MAR_INTERP_CUBIC,
+                                   .record_slots = REC, .loudness_slots = 4, .on_silent_node = reaction,
+                                   .max_overruns = kind == 4 ? 3 : 0 };
+        int status;
+        mar_engine *e = mar_engine_create(&opt, axes, AXES, show, N, loud, NULL, &status);
+        CHECK(e != NULL, "faults %d: create %d", kind, status);
+        if (!e)
+            continue;
+        size_t rs = mar_engine_record_size(e);
+        unsigned char *buf = malloc(rs * REC);
+        long before = allocations;
+        mar_engine_step(e, AT);
+        if (kind == 4) {
+            mar_engine_count_overruns(e, 2);
+            mar_engine_step(e, 5);
+            mar_engine_count_overruns(e, 1);
+        } else if (kind == 5) {
+            mar_sink_set(mar_engine_sink(e), MAR_SINK_FD, 1000, 0, MAR_SINK_SERIAL);  /* not open: EBADF */
+        } else {
+            mar_engine_set_node_alarms(e, 0x6, 0x2);
+        }
+        int from = kind == 4 ? AT + 5 : kind == 5 ? AT + 1 : AT;   /* the first tick that knows */
+        mar_engine_step(e, 100);
+        if (kind <= MAR_FAULT_ESTOP)
+            mar_engine_set_node_alarms(e, 0, 0);        /* the node answers again */
+        mar_engine_step(e, 100);
+        CHECK(allocations == before, "faults %d: ticks allocated %ld times", kind, allocations - before);
+        size_t n = mar_engine_drain_records(e, buf, REC);
+        CHECK(n == AT + 200 + (kind == 4 ? 5 : 0), "faults %d: recorded %zu", kind, n);
+        mar_record r;
+        double cmd[AXES], prev[AXES], v[AXES] = { 0 };
+        int rest_at = -1, stops = kind == MAR_FAULT_STOP || kind == MAR_FAULT_ESTOP || kind >= 4;
+        int back = kind <= MAR_FAULT_ESTOP ? from + 100 : (int)n;     /* first tick with the node answering */
+        double held = 0;                        /* the playback position at `from` */
+        double slowest = 0;                     /* ticks the limits need to brake from the speeds at `from` */
+        for (size_t i = 0; i < n; i++) {
+            int t = (int)i;
+            memcpy(&r, buf + i * rs, sizeof r);
+            memcpy(cmd, buf + i * rs + sizeof r, sizeof cmd);
+            int silent = kind == 5 ? t >= from : kind <= MAR_FAULT_ESTOP && t >= from && t < back;
+            CHECK(!!(r.flags & MAR_FLAG_NODE_SILENT) == silent, "faults %d tick %d: flags 0x%x", kind, t, r.flags);
+            CHECK(!!(r.flags & MAR_FLAG_FAULT_STOP) == (stops && t >= from), "faults %d tick %d: flags 0x%x",
+                  kind, t, r.flags);
+            CHECK(!!(r.flags & MAR_FLAG_FAULT_HOLD) == (kind == MAR_FAULT_HOLD && silent),
+                  "faults %d tick %d: flags 0x%x", kind, t, r.flags);
+            CHECK(!!(r.flags & MAR_FLAG_OVERRUNS) == (kind == 4 && t >= from), "faults %d tick %d: flags 0x%x",
+                  kind, t, r.flags);
+            CHECK(!!(r.flags & MAR_FLAG_LINK_LOST) == (kind == 5 && t >= from), "faults %d tick %d: flags 0x%x",
+                  kind, t, r.flags);
+            if (kind <= MAR_FAULT_ESTOP)
+                CHECK(r.node_alarms == (t >= from && t < back ? 0x6u : 0u), "faults %d tick %d: alarms 0x%x",
+                      kind, t, r.node_alarms);
+            double moved = 0;
+            for (int j = 0; j < AXES; j++) {
+                const mar_limits *l = &axes[j].limits;
+                double vj = i ? (cmd[j] - prev[j]) / 0.02 : 0;
+                CHECK(cmd[j] >= l->pos_min && cmd[j] <= l->pos_max, "faults %d: outside", kind);
+                if (i && t >= from && (stops || (kind == MAR_FAULT_HOLD && t < back))) {
+                    CHECK(fabs(vj - v[j]) <= l->max_accel * 0.02 * (1 + 1e-9), "faults %d tick %d axis %d: "
+                          "accel %g > %g", kind, t, j, (vj - v[j]) / 0.02, l->max_accel);
+                    CHECK(fabs(vj) <= fabs(v[j]) + 1e-12, "faults %d tick %d axis %d: speeds up", kind, t, j);
+                }
+                if (t == from)
+                    slowest = fmax(slowest, fabs(v[j]) / (l->max_accel * 0.02));
+                moved = fmax(moved, fabs(vj));
+                v[j] = vj;
+                prev[j] = cmd[j];
+            }
+            if (t >= from && rest_at < 0 && moved == 0)
+                rest_at = t;
+            if (stops && rest_at >= 0)
+                CHECK(moved == 0, "faults %d tick %d: moves after rest (latched)", kind, t);
+            if (kind == MAR_FAULT_CONTINUE && i)
+                CHECK(r.position == (double)t, "continue: tick %d at %g", t, r.position);
+            if (t == from)
+                held = r.position;
+            if (kind == MAR_FAULT_HOLD && t > from && t < back)
+                CHECK(r.position == held && (r.flags & (MAR_FLAG_MOVING | MAR_FLAG_HOLDING)),
+                      "hold tick %d: p %g (held %g), flags 0x%x", t, r.position, held, r.flags);
+            if (kind == MAR_FAULT_HOLD && t >= back + 60)    /* blended back in: playing on from there */
+                CHECK(!(r.flags & (MAR_FLAG_MOVING | MAR_FLAG_HOLDING)) && r.position > held,
+                      "hold tick %d: p %g (held %g), flags 0x%x", t, r.position, held, r.flags);
+        }
+        if (kind != MAR_FAULT_CONTINUE)
+            CHECK(rest_at >= from && rest_at - from <= (int)ceil(slowest) + 2, "faults %d: at rest %d ticks after "
+                  "the news, the limits need %.1f", kind, rest_at - from, slowest);
+        free(buf);
+        mar_engine_destroy(e);
+    }
+}
+
 static void test_ring_and_hist(void)
 {
     mar_ring r;
@@ -518,6 +630,7 @@ int main(void)
     test_sink();
     test_on_lost();
     test_source_lost();
+    test_faults();
     test_ring_and_hist();
     test_rtloop();
     if (failures) {

@@ -166,6 +166,11 @@ class NodeMonitor:
                     mask |= 1 << i
         return mask
 
+    def silent_mask(self) -> int:
+        """Bit i set when the i-th node (ascending) is silent."""
+        with self._lock:
+            return sum(1 << i for i, s in enumerate(self.nodes.values()) if s.silent)
+
     def summary(self) -> dict:
         with self._lock:
             return {"frames_ok": self.frames_ok, "frames_bad": self.frames_bad,

@@ -20,7 +20,9 @@ class LinkSupervisor:
     def __init__(self, link, config: FigureConfig, current_tick, set_alarms,
                  poll_one: bool = False, on_loudness=None, log_path=None):
         """current_tick(): the engine's latest tick number (or None before the first);
-        set_alarms(mask): hands the alarm bits to the C tick; poll_one: each
+        set_alarms(alarms, silent): hands the alarm bits, and those of the
+        silent nodes, to the C tick, which applies the figure's [faults]
+        silent_node at its next tick; poll_one: each
         SYNC polls one node in turn; log_path: where every STATUS is written
         (beside the flight record), or None."""
         self.link = link
@@ -31,6 +33,7 @@ class LinkSupervisor:
                                  poll_interval=len(nodes) if poll_one else 1)
         # (engine tick, node, evidence tick) of each silent-node report
         self.reports: list[tuple[int, int, int]] = []
+        self.estop_sent = False             # the [faults] silent_node = "estop" reaction was sent
         self._current_tick = current_tick
         self._set_alarms = set_alarms
         self._stop = threading.Event()
@@ -65,9 +68,16 @@ class LinkSupervisor:
         tick = self._current_tick()
         if tick is None:
             return
-        for node, evidence in self.nodes.check(tick):
+        found = self.nodes.check(tick)
+        self._set_alarms(self.nodes.alarm_mask(), self.nodes.silent_mask())
+        for node, evidence in found:
             self.reports.append((tick, node, evidence))
-        self._set_alarms(self.nodes.alarm_mask())
+        if found and self.config.faults.silent_node == "estop" and not self.estop_sent:
+            self.estop_sent = True          # the tick's stop ramp is on its way already
+            try:
+                self.estop()
+            except (OSError, ValueError):   # the link itself is gone (serial.SerialException is an OSError)
+                pass
 
     def _watch(self) -> None:
         last = None

@@ -1,0 +1,97 @@
+"""The [faults] table: its validation, and the reactions as the Engine and
+`play`'s summary see them (the tick's own checks are in ext/tests/test_engine.c)."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from conftest import figure_dict, make_figure, make_show
+from marionette import _core, faults
+from marionette.config import FaultConfig, config_from_dict
+from marionette.engine import Engine
+from marionette.errors import ConfigError
+
+
+def test_defaults_are_stop_and_no_overrun_threshold():
+    config = make_figure()
+    assert config.faults == FaultConfig(silent_node="stop", overruns=0)
+    doc = figure_dict()
+    doc["faults"] = {"silent_node": "hold", "overruns": 50}
+    assert config_from_dict(doc, "f.toml").faults == FaultConfig("hold", 50)
+
+
+@pytest.mark.parametrize("table, expected", [
+    ({"silent_node": "panic"}, "f.toml: faults.silent_node = 'panic' is not known (use one of "
+                               "('stop', 'hold', 'estop', 'continue'))"),
+    ({"silent_node": 1}, "f.toml: faults.silent_node = 1 is not known"),
+    ({"overruns": -1}, "f.toml: faults.overruns = -1 must be an integer in 0..1000000"),
+    ({"overruns": 2.5}, "f.toml: faults.overruns = 2.5 must be an integer"),
+    ({"overruns": True}, "f.toml: faults.overruns = True must be an integer"),
+    ({"on_fire": "run"}, "f.toml: faults.on_fire = 'run' is not a known key (known: overruns, silent_node)"),
+    ("stop", "f.toml: [faults] must be a table"),
+])
+def test_bad_faults_table_is_refused_with_file_key_and_value(table, expected):
+    doc = figure_dict()
+    doc["faults"] = table
+    with pytest.raises(ConfigError) as info:
+        config_from_dict(doc, "f.toml")
+    assert expected in str(info.value)
+
+
+def moving_engine(reaction):
+    config = replace(make_figure(), faults=FaultConfig(silent_node=reaction))
+    t = np.arange(300) * config.tick_period
+    show = make_show(config, [0.5 * np.sin(2 * np.pi * 0.6 * t + j) for j in range(3)])
+    return config, Engine(config, show, record=True)
+
+
+@pytest.mark.parametrize("reaction", ["stop", "hold", "estop", "continue"])
+def test_a_silent_node_in_step_mode_and_the_summary(reaction):
+    config, engine = moving_engine(reaction)
+    with engine:
+        engine.step(100)
+        engine._core.set_node_alarms(0b1, 0b1)     # what the supervisor does on a silent node
+        engine.step(100)
+        records = engine.records()
+    flags = records["flags"]
+    assert np.all((flags[100:] & _core.FLAG_NODE_SILENT) != 0) and not np.any(flags[:100] & _core.FLAG_NODE_SILENT)
+    lines, status = faults.summary(records, config, 0)
+    assert status == 1                              # it ended with a silent node, whatever the reaction
+    assert f"silent_node = {reaction}" in lines[0] and lines[-1] == "  the show ended on a fault"
+    if reaction == "continue":
+        assert np.all(np.diff(records["position"]) == 1)
+        return
+    stop = _core.FLAG_FAULT_HOLD if reaction == "hold" else _core.FLAG_FAULT_STOP
+    assert np.all((flags[100:] & stop) != 0) and not np.any(flags[:100] & stop)
+    rest, allowed = faults.rest_after(records, config, 100)
+    assert rest is not None and rest * config.tick_period <= allowed + 2 * config.tick_period
+    assert f"every axis at rest {rest * config.tick_period:.2f} s later" in lines[1]
+    cmd = records["command"]
+    for j, a in enumerate(config.axes):
+        assert a.min <= cmd[:, j].min() and cmd[:, j].max() <= a.max
+        accel = np.diff(cmd[99:, j], 2) / config.tick_period ** 2
+        assert np.all(np.abs(accel) <= a.max_accel * (1 + 1e-9))
+
+
+def test_hold_blends_back_in_when_the_node_answers_and_ends_clean():
+    config, engine = moving_engine("hold")
+    with engine:
+        engine.step(100)
+        engine._core.set_node_alarms(0b1, 0b1)
+        engine.step(50)
+        engine._core.set_node_alarms(0, 0)
+        engine.step(100)
+        records = engine.records()
+    assert records["position"][149] == records["position"][100]     # the clock waited
+    assert not records["flags"][-1] & (_core.FLAG_FAULT_HOLD | _core.FLAG_MOVING | _core.FLAG_HOLDING)
+    assert records["position"][-1] > records["position"][149]        # playing on
+    lines, status = faults.summary(records, config, 0)
+    assert status == 0 and "the show ended on a fault" not in lines
+
+
+def test_no_fault_says_nothing():
+    config, engine = moving_engine("stop")
+    with engine:
+        engine.step(50)
+        records = engine.records()
+    assert faults.summary(records, config, 0) == ([], 0)
