@@ -91,7 +91,9 @@ class Simulator:
 
         self.log = log
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "marionette.cli", "sim", "--serial", "--priority", str(SIM_PRIORITY)],
+            # -P: not the working directory first on sys.path (a source checkout there
+            # would shadow the installed package, whose extensions are built)
+            [sys.executable, "-P", "-m", "marionette.cli", "sim", "--serial", "--priority", str(SIM_PRIORITY)],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=log, text=True,
             start_new_session=True, preexec_fn=setup)
         self.summary: dict | None = None

@@ -134,6 +134,7 @@ class Engine:
         self.end = end
         self._end_thread: threading.Thread | None = None
         self._rested = threading.Event()
+        self._estopped = False              # the operator's e-stop holds the nodes latched
         self._cancel_end = threading.Event()
         if lead not in LEAD_MODES:
             raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
@@ -315,12 +316,19 @@ class Engine:
         return self._core.running
 
     def stop(self) -> None:
-        """Stop the real-time loop and drain what it left in the rings."""
+        """Stop the real-time loop and drain what it left in the rings. A
+        figure stopped at rest on a link (an operator's controlled stop)
+        leaves its nodes told, as at the show's end; an e-stopped one stays
+        latched."""
         if self._end_thread is not None:       # stopped before the end came: no end action
             self._cancel_end.set()
             self._end_thread.join()
             self._end_thread = None
+        snap = self._core.snapshot() if self.supervisor is not None and self._core.running else None
+        at_rest = snap is not None and bool(snap["flags"] & _core.FLAG_HOLDING) and not self._estopped
         _raise_for(self._core.stop(), "stopping the real-time loop")
+        if at_rest:
+            self._tell_nodes_at_rest()
         if self.supervisor is not None:
             self.supervisor.stop()
         self._stop_drain.set()
@@ -328,6 +336,18 @@ class Engine:
             self._drain_thread.join()
             self._drain_thread = None
         self._drain()
+
+    def _tell_nodes_at_rest(self) -> None:
+        """The loop stopped with the figure at rest: ESTOP (the quick stop
+        moves nothing), then a release, so the nodes hold with no watchdog
+        to trip; the "estop" fault reaction leaves them latched."""
+        try:
+            self.supervisor.estop()
+            if not self.supervisor.estop_sent:
+                time.sleep(2 * self.config.tick_period)
+                self.supervisor.release()
+        except OSError:                     # the link is gone (its nodes' watchdogs stop them)
+            pass
 
     def wait(self, timeout: float | None = None) -> bool:
         """Wait until the loop stops by itself (max_ticks); True if it did.
@@ -337,13 +357,7 @@ class Engine:
             if not self._rested.wait(timeout):
                 return False
             _raise_for(self._core.stop(), "stopping the real-time loop")
-            try:
-                self.supervisor.estop()     # at rest: the quick stop moves nothing ...
-                if not self.supervisor.estop_sent:  # (the "estop" fault reaction leaves them latched)
-                    time.sleep(2 * self.config.tick_period)
-                    self.supervisor.release()   # ... and the release leaves the nodes holding
-            except OSError:                 # the link is gone (its nodes' watchdogs stop them)
-                pass
+            self._tell_nodes_at_rest()
             self._end_thread.join()
             self._end_thread = None
             return True
@@ -413,12 +427,14 @@ class Engine:
         """E-stop: every node latches and brakes to rest (ESTOP), and the
         engine's own commands ramp to rest too (stop_motion)."""
         self.stop_motion()
+        self._estopped = True
         if self.supervisor is not None:
             self.supervisor.estop()
 
     def release_estop(self) -> None:
         """Release the nodes' e-stop latch; they hold where they stopped.
         blend_in() then moves the figure back into the show."""
+        self._estopped = False
         if self.supervisor is not None:
             self.supervisor.release()
 

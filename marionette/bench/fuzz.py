@@ -104,7 +104,7 @@ def run(frames: int = DEFAULT_FRAMES, seed: int = SEED) -> dict:
     """The fuzz in a child process; its report, evaluated."""
     failed = {"crashed": False, "hung": False}
     try:
-        child = subprocess.run([sys.executable, "-m", "marionette.bench.fuzz", "--worker",
+        child = subprocess.run([sys.executable, "-P", "-m", "marionette.bench.fuzz", "--worker",
                                 "--frames", str(frames), "--seed", str(seed)],
                                capture_output=True, text=True, timeout=hang_limit(frames),
                                cwd=tempfile.gettempdir())   # the installed package, not a source tree

@@ -45,7 +45,7 @@ SIM_PRIORITY = 30       # and of the simulator
 
 
 def _start_sim(args: list[str]) -> tuple[subprocess.Popen, dict]:
-    proc = subprocess.Popen([sys.executable, "-m", "marionette.cli", "sim", *args],
+    proc = subprocess.Popen([sys.executable, "-P", "-m", "marionette.cli", "sim", *args],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, cwd=tempfile.gettempdir())
     ready = json.loads(proc.stdout.readline() or "{}")

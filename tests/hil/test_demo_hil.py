@@ -76,6 +76,8 @@ def test_demo_ctrl_c_or_sigterm_leaves_no_simulator(sig, when, tmp_path):
         if when == "in the show":                             # a controlled stop, the summaries
             assert "played " in out and "watchdog trips:" in out, out + err
             assert "ended early by " + ("Ctrl-C" if sig == signal.SIGINT else "SIGTERM") in err
+            if sig == signal.SIGINT:                          # stopped at rest: the nodes were told
+                assert "  watchdog trips: 0" in out.splitlines(), out
         assert list(tmp_path.iterdir()) == []                 # its temporary directory removed
     finally:
         if proc.poll() is None:
