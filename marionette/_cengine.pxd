@@ -64,6 +64,12 @@ cdef extern from "mar_follow.h" nogil:
 
 cdef extern from "mar_engine.h" nogil:
     enum:
+        MAR_FLAG_LIMITED
+        MAR_FLAG_END
+        MAR_FLAG_BAD_INPUT
+        MAR_FLAG_MOVING
+        MAR_FLAG_HOLDING
+        MAR_FLAG_UNFOLLOWED
         MAR_FLAG_SOURCE_LOST
         MAR_FLAG_NODE_SILENT
         MAR_FLAG_FAULT_STOP
