@@ -18,6 +18,7 @@ from marionette.cmd_sync_sim import add_start_argument
 from marionette.config import load_config
 from marionette.console import open_view
 from marionette.demo import DEMO_SHOW
+from marionette._core import FLAG_END
 from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
 from marionette.faults import FaultWatcher, summary as fault_summary
@@ -84,8 +85,16 @@ def cmd_play(args) -> int:
     if args.output and args.link:
         raise MarionetteError("give --output or --link, not both")
     live = _recording_source(args, config)
-    n = args.ticks if args.ticks is not None else show.n_ticks
     follow = args.follow or (True if (live is not None or args.audio_device is not None) else None)
+    # without --ticks, a show that follows music runs to its end (FLAG_END), which slow
+    # music reaches after more ticks than the show has: at most at rate_min, plus a
+    # minute of waiting at the cue
+    until_end = args.ticks is None and bool(follow)
+    n = args.ticks if args.ticks is not None else show.n_ticks
+    if until_end:
+        n = int(np.ceil(show.n_ticks / config.follow.rate_min)) + int(60.0 / period)
+        if live is not None:            # a recording: no longer than it lasts, no shorter than the show
+            n = max(show.n_ticks, min(n, len(live.loudness) + 1))
     if live is not None:        # said before the show, which goes on regardless
         for line in recording_warnings(args.music, live.loudness, period, show.duration, args.start):
             print(line, file=sys.stderr, flush=True)
@@ -115,7 +124,7 @@ def cmd_play(args) -> int:
             view = open_view(args, engine)      # the live console or status lines, Ctrl-C
             if args.realtime:
                 engine.start(priority=args.priority, cpu=args.cpu, lock_memory=args.lock_memory,
-                             max_ticks=n)
+                             max_ticks=n, until_show_end=until_end)
                 faults = FaultWatcher(engine, period).start()     # [faults]: told at once
                 if follow:
                     watcher = LostWatcher(engine, period, on_lost).start()
@@ -130,6 +139,9 @@ def cmd_play(args) -> int:
                 for k in range(n):
                     live.feed_tick(k)
                     view.step(1)
+                    snap = engine.snapshot()
+                    if until_end and snap is not None and snap.flags & FLAG_END:
+                        break
             else:
                 view.step(n)
             stats = engine.stats()

@@ -135,6 +135,7 @@ class Engine:
         self._end_thread: threading.Thread | None = None
         self._rested = threading.Event()
         self._estopped = False              # the operator's e-stop holds the nodes latched
+        self._until_show_end = False        # start(until_show_end=True): the show's end ends the run
         self._cancel_end = threading.Event()
         if lead not in LEAD_MODES:
             raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
@@ -248,13 +249,16 @@ class Engine:
             n -= k
 
     def start(self, *, priority: int = 80, cpu: int | None = None, lock_memory: bool = False,
-              max_ticks: int = 0) -> dict:
+              max_ticks: int = 0, until_show_end: bool = False) -> dict:
         """Start the real-time loop (SCHED_FIFO at priority when permitted).
 
         Returns what was granted; warns when FIFO, pinning or memory locking
-        was refused. max_ticks > 0 makes the loop stop by itself."""
+        was refused. max_ticks > 0 makes the loop stop by itself;
+        until_show_end: it stops at the show's end (FLAG_END) too, which a
+        show following slow music reaches after more ticks than it has."""
         if not 0 <= priority <= 99:
             raise ValueError(f"priority must be 0..99, not {priority}")
+        self._until_show_end = until_show_end
         safe_end = self.end is not None and self.supervisor is not None and max_ticks > 0
         status, report = self._core.start(priority, -1 if cpu is None else cpu,
                                           lock_memory, 0 if safe_end else max_ticks)
@@ -297,7 +301,7 @@ class Engine:
             return False
         def fault(rec) -> bool:         # a fault reaction stopped the show: it ends there
             return bool(rec["flags"] & _core.FLAG_FAULT_STOP)
-        if not until(lambda rec: int(rec["tick"]) >= last_tick - 1 or fault(rec)):
+        if not until(lambda rec: int(rec["tick"]) >= last_tick - 1 or fault(rec) or self._at_show_end(rec)):
             return
         if not fault(self._core.snapshot()):
             if self.end == "home":
@@ -310,6 +314,9 @@ class Engine:
         settle = max(a.dead_time + SETTLE_TAUS * a.time_constant for a in self.config.axes)
         if not self._cancel_end.wait(settle + 2 * self.config.tick_period):
             self._rested.set()
+
+    def _at_show_end(self, rec) -> bool:
+        return self._until_show_end and bool(rec["flags"] & _core.FLAG_END)
 
     @property
     def running(self) -> bool:
@@ -363,6 +370,10 @@ class Engine:
             return True
         end = None if timeout is None else time.monotonic() + timeout
         while self._core.running:
+            rec = self._core.snapshot()
+            if rec is not None and self._at_show_end(rec):
+                _raise_for(self._core.stop(), "stopping the real-time loop")
+                return True
             if end is not None and time.monotonic() >= end:
                 return False
             time.sleep(0.01)

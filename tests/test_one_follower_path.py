@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import run_cli
+from marionette._core import FLAG_END
 from marionette.cmd_sync_sim import simulate
 from marionette.config import load_config
 from marionette.music.feature import read_wav, wav_frames, write_wav
@@ -80,3 +81,23 @@ def test_play_and_sync_sim_agree_on_random_decks(tmp_path):
                     seconds=20.0, sample_rate=11025, seed=case)
         live = tape(piece.samples, piece.sample_rate, deck, tmp_path / f"live{case}.wav")
         assert_same_track(show, live, tmp_path)
+
+
+def test_play_runs_to_the_end_of_the_show_at_any_speed(tmp_path):
+    """Without --ticks, play --music runs until the show's end (FLAG_END):
+    on a slow tape after more ticks than the show has (as long as the
+    recording lasts), on a fast one after fewer."""
+    config = load_config(None)
+    samples, rate = read_wav(sample_path("music.wav"))
+    show = show_for(config, sample_path("music.wav"), tmp_path)
+    n = len(wav_frames(sample_path("music.wav"), T)[0])
+    for speed in (0.94, 1.06):
+        live = tape(samples, rate, Deck(speed=speed, snr_db=20, seed=3), tmp_path / f"live{speed}.wav")
+        record = tmp_path / f"flight{speed}.bin"
+        result = run_cli("play", show, "--music", live, "--record", record)
+        assert result.returncode == 0, result.stderr
+        _, rec = read_flight_record(record)
+        if speed < 1:       # the recording ends a little before the show's end (within 0.2 s)
+            assert len(rec) > n and rec["position"][-1] >= n - 1 - 10, (len(rec), rec["position"][-1])
+        else:
+            assert len(rec) < n and rec["flags"][-1] & FLAG_END, (len(rec), rec["flags"][-1])

@@ -80,3 +80,17 @@ def test_snapshots_are_consistent_while_the_loop_runs(rng):
     assert len(seen) >= 30
     for tick, commands in seen.items():
         assert commands == list(records["command"][tick]), f"torn snapshot at tick {tick}"
+
+
+def test_a_run_until_the_show_end_stops_there(rng):
+    """until_show_end: the loop stops at the show's end (FLAG_END), here
+    reached at rate 1.25 after about 4/5 of the show's ticks, not at
+    max_ticks; without it the loop runs to max_ticks."""
+    config = make_figure(4)
+    show = make_show(config, smooth_dance(config, 100, rng))
+    for until_end, ticks in ((True, range(78, 86)), (False, range(200, 201))):
+        with Engine(config, show, record=True, rate=1.25) as engine:
+            engine.start(priority=0, max_ticks=200, until_show_end=until_end)
+            assert engine.wait(timeout=30.0)
+            engine.stop()
+            assert engine.stats()["ticks"] in ticks, (until_end, engine.stats()["ticks"])
