@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from conftest import figure_dict, make_figure, run_cli as run
-from marionette._core import FLAG_UNFOLLOWED
+from marionette._core import FLAG_END, FLAG_UNFOLLOWED
 from marionette.config import config_from_dict, default_config_path, load_config
 from marionette.demo import make_demo_show
 from marionette.engine import Engine
@@ -117,7 +117,9 @@ def test_a_truncated_recording_is_warned_about(files):
     assert result.stderr.splitlines()[0] == (
         f"warning: live recording {files / 'short.wav'} is 8.00 s long, less than 50% of the show's "
         f"music from the cue at 5 s (35.00 s): truncated?")
-    assert len(records) == 2000
+    # the follower plays on at its rate past the recording's end, to the show's end (FLAG_END),
+    # where play ends: fewer ticks than the show has, as it started 5 s in
+    assert records["flags"][-1] & FLAG_END and records["position"][-1] == 1999 and len(records) < 2000
     # the whole recording from the cue at 30 s is long enough: no warning
     result, _ = play_music(files, "short.wav", "--start", "30", "--ticks", "50")
     assert "truncated" not in result.stderr
