@@ -190,6 +190,13 @@ def _axis(src: str, index: int, table: dict) -> AxisConfig:
     )
 
 
+def follow_range(name: str) -> str:
+    """A follower option's allowed range and unit from the C table, as the
+    errors say it: "[lo, hi] unit"."""
+    info = _follow.OPTIONS[name]
+    return f"[{info['lo']:g}, {info['hi']:g}]" + (f" {info['unit']}" if info["unit"] else "")
+
+
 def _follow_table(src: str, table) -> FollowConfig:
     """The optional [follow] table, checked against the C follower's table
     (kind and range of each option); defaults for what it leaves out."""
@@ -212,8 +219,7 @@ def _follow_table(src: str, table) -> FollowConfig:
         else:
             number = _number(src, f"follow.{key}", value)
             if not info["lo"] <= number <= info["hi"]:
-                raise ConfigError(f"{src}: follow.{key} = {value!r} must be in [{info['lo']:g}, {info['hi']:g}]"
-                                  + (f" {info['unit']}" if info["unit"] else ""))
+                raise ConfigError(f"{src}: follow.{key} = {value!r} must be in {follow_range(key)}")
             values[key] = number
     return FollowConfig(**values)
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from marionette import _follow
-from marionette.config import FollowConfig
+from marionette.config import FollowConfig, follow_range
 from marionette.errors import MarionetteError
 
 STATES = _follow.STATES         # state code -> name: searching, locked, holding, paused, waiting
@@ -214,6 +214,5 @@ def options_problem(opt: dict) -> str | None:
         return f"{exc.args[0]} = {opt.get(exc.args[0])!r} is not a value of its kind"
     name = (problem or "").split(" ")[0]
     if name in OPTIONS and problem.endswith("outside its range"):
-        info = OPTIONS[name]
-        return f"{name} = {opt[name]!r} must be in [{info['lo']:g}, {info['hi']:g}] {info['unit']}".rstrip()
+        return f"{name} = {opt[name]!r} must be in {follow_range(name)}"
     return problem
