@@ -2,7 +2,7 @@
 
     marionette play [SHOW] [--config FIGURE.toml] [--realtime] [--link ...] [--music ...]
     marionette check | shape | calibrate | teach | plot | sim | sync-sim | log ...
-    marionette bench tick|jitter|moves|fuzz|link|sync [...]
+    marionette bench tick|jitter|moves|fuzz|link|sync|bands [...]
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from marionette.music.report import (LostWatcher, choose_latency, follow_share, 
                                      verdict_line)
 from marionette.show import LIMIT_POLICIES, load_show
 
-BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync")
+BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync", "bands")
 # commands that live in their own modules (marionette/cmd_<name>.py, each with
 # register(subparsers) setting run=...)
 COMMAND_MODULES = ("calibrate", "teach", "plot", "sim", "sync_sim", "log", "demo")
