@@ -3,8 +3,8 @@ turn a recording of the dancer into a show for the figure.
 
 detections -> triangulation -> rucksack pose -> complement one missing LED ->
 bridge gaps -> 21-tap FIR -> compress the working area -> resample to the tick ->
-axis map -> rotation folded by whole turns -> fit to the figure's limits -> pragmatic filter (timed parabolic moves) ->
-show with the music's stored loudness.
+axis map -> rotation folded by whole turns -> fit to the figure's limits ->
+pragmatic filter (timed parabolic moves) -> show with the music's stored loudness.
 
 The .npz holds the show (marionette.show) and, as extra arrays that the show loader
 ignores, every filter stage for ``marionette plot``. Formats: docs/teach.md.
