@@ -3,8 +3,8 @@ turn a recording of the dancer into a show for the figure.
 
 detections -> triangulation -> rucksack pose -> complement one missing LED ->
 bridge gaps -> 21-tap FIR -> compress the working area -> resample to the tick ->
-axis map -> fit to the figure's limits -> pragmatic filter (timed parabolic moves) ->
-show with the music's stored loudness.
+axis map -> rotation folded by whole turns -> fit to the figure's limits ->
+pragmatic filter (timed parabolic moves) -> show with the music's stored loudness.
 
 The .npz holds the show (marionette.show) and, as extra arrays that the show loader
 ignores, every filter stage for ``marionette plot``. Formats: docs/teach.md.
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -23,7 +24,7 @@ from marionette.music.feature import wav_frames
 from marionette.progress import Progress
 from marionette.shape import POLICIES, shape_show
 from marionette.show import LIMIT_POLICIES, Show, fit_to_figure
-from marionette.teach.axis_map import map_axes
+from marionette.teach.axis_map import TURN, fold_turns, map_axes, unwind
 from marionette.teach.camera_file import CameraFileError, read_cameras
 from marionette.teach.filters import DEFAULT_NUMTAPS
 from marionette.teach.make_sample import sample_path
@@ -41,6 +42,7 @@ STAGES = (
     ("mapped", "tick", "resampled to the tick and mapped to the axis"),
     ("shaped", "tick", "shaped: parabolic moves between points of rest (pragmatic filter)"),
 )
+UNWIND_SPEED = 0.8       # turning back a folded rotation: of the axis's top speed [1]
 STEPS = ("settings", "cameras", "recording", "poses", "axes", "shaping", "music", "writing")
 
 
@@ -133,6 +135,7 @@ def _teach(args, progress: Progress) -> int:
     stage_values = {key: _map_stage(getattr(stages, key), amap, names, home)
                     for key, base, _ in STAGES if base == "set"}
     stage_values["mapped"] = _map_stage(stages.resampled, amap, names, home)
+    _fold_rotation(stage_values["mapped"], config, amap.rotation_name, stages.tick_times)
     show = Show(axis_names=list(names), units=[a.unit for a in config.axes],
                 positions=stage_values["mapped"].copy(), loudness=np.zeros(stages.tick_times.size),
                 tick_period=config.tick_period,
@@ -166,6 +169,29 @@ def _teach(args, progress: Progress) -> int:
 
     _report(args, config, settings, stages, show, report, untaught, music_frames)
     return 0
+
+
+def _fold_rotation(mapped: np.ndarray, config, name: str, times: np.ndarray) -> None:
+    """Fold the rotation axis (a row of ``mapped``, changed in place) into its limits by
+    whole turns when the dancer turned further than the axis reaches, turning back at
+    each wrap, and say so on stderr. An axis with less than a full turn of range is
+    left to the limits check."""
+    if name not in config.axis_names:
+        return
+    j = config.axis_names.index(name)
+    axis = config.axes[j]
+    yaw = mapped[j].copy()
+    if axis.max - axis.min < TURN or (yaw.min() >= axis.min and yaw.max() <= axis.max):
+        return
+    fold = fold_turns(yaw, axis.min, axis.max)
+    mapped[j] = unwind(fold.values, fold.wraps, UNWIND_SPEED * axis.max_speed, config.tick_period)
+    at = ", ".join(f"{times[k]:.2f} s" for k in fold.wraps[:5]) + (", ..." if fold.wraps.size > 5 else "")
+    print(f"warning: axis {name!r}: the dancer's yaw spans {(yaw.max() - yaw.min()) / TURN:.1f} turns "
+          f"(from {yaw.min():.3g} to {yaw.max():.3g} {axis.unit}), beyond its limits "
+          f"[{axis.min!r}, {axis.max!r}]; folded by whole turns with {fold.wraps.size} wrap(s)"
+          + (f" (at {at}), where the figure turns back at up to {UNWIND_SPEED:.0%} of its top "
+             "speed until it meets the dancer's orientation again" if fold.wraps.size else ""),
+          file=sys.stderr, flush=True)
 
 
 def save_with_extras(show: Show, path, extra: dict) -> None:

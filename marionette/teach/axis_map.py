@@ -7,7 +7,8 @@ in SI units.  Axis names are configuration, never hard-coded in the computation.
 
 * Horizontal axes: ``x = x0``, ``y = y0`` [m].
 * Rotation axis: ``rot = unwrap(psi) + rotation_offset`` [rad] (continuous through
-  full turns).
+  full turns).  A dancer who turns freely leaves a rotation axis of limited range;
+  :func:`fold_turns` brings it back by whole turns, as few times as possible.
 * String winches: each winch ``j`` holds the puppet at a point ``p_j`` of the body frame
   (the rucksack frame: origin at the LED square centre, x forward, y left, z up) [m].
   Its value is ``gain_j * dz_j`` with the vertical displacement of that point
@@ -28,6 +29,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Mapping
 
 import numpy as np
+
+TURN = 2.0 * np.pi       # one full turn [rad]
 
 
 @dataclass
@@ -168,4 +171,70 @@ def map_axes(pose, config: AxisMap | None = None) -> dict[str, np.ndarray]:
         dz = light.target_height + lift - lz
         out[light.pan_name] = np.unwrap(np.arctan2(dy, dx) - light.pan_offset)
         out[light.tilt_name] = np.arctan2(dz, np.hypot(dx, dy))
+    return out
+
+
+@dataclass
+class Fold:
+    """A rotation folded into an axis's range by whole turns (:func:`fold_turns`)."""
+
+    values: np.ndarray       # (K,) folded rotation [rad]
+    turns: np.ndarray        # (K,) whole turns added at each sample [1]
+    wraps: np.ndarray        # sample indices where ``turns`` changes (the figure turns back)
+
+
+def fold_turns(angle, lo: float, hi: float) -> Fold:
+    """Add whole turns to an unwrapped rotation ``angle`` (K,) [rad] so that every value
+    lies in ``[lo, hi]`` [rad], changing the number of turns at the fewest samples.
+
+    The turns are chosen greedily: a run of samples keeps one number of turns while some
+    number fits all of them, which gives the fewest changes (each run is as long as it
+    can be).  Within a run, the number nearest to the previous run's is taken (0 for the
+    first): a rotation that fits is left as it is, and on a range of less than two turns
+    a wrap turns the figure back one turn.  Needs ``hi - lo >= TURN`` (every orientation
+    reachable).
+    """
+    a = np.asarray(angle, float)
+    if hi - lo < TURN:
+        raise ValueError(f"range [{lo!r}, {hi!r}] rad is less than a full turn: cannot fold")
+    fewest = np.ceil((lo - a) / TURN)       # turns that lift each sample to at least lo [1]
+    most = np.floor((hi - a) / TURN)        # turns that keep it at most hi [1]
+    turns = np.zeros(a.size, int)
+    wraps = []
+    prev, start = 0, 0
+    run_lo, run_hi = (fewest[0], most[0]) if a.size else (0.0, 0.0)
+    for k in range(1, a.size + 1):
+        if k < a.size and max(run_lo, fewest[k]) <= min(run_hi, most[k]):
+            run_lo, run_hi = max(run_lo, fewest[k]), min(run_hi, most[k])
+            continue
+        n = int(min(max(prev, run_lo), run_hi))
+        turns[start:k] = n
+        if start > 0:
+            wraps.append(start)
+        if k < a.size:
+            prev, start, run_lo, run_hi = n, k, fewest[k], most[k]
+    values = np.clip(a + TURN * turns, lo, hi)       # the clip only removes rounding [rad]
+    return Fold(values, turns, np.array(wraps, int))
+
+
+def unwind(values, wraps, max_speed: float, dt: float) -> np.ndarray:
+    """Replace the jump of a whole turn at each wrap of a folded rotation ``values`` (K,)
+    [rad] by a straight run back at no more than ``max_speed`` [rad/s] (samples ``dt``
+    [s] apart) that ends where it meets the folded rotation again; one that cannot meet
+    it before the next wrap or the last sample runs at that speed towards it until
+    then.  The run lies between two values inside the range, so it stays inside; the
+    figure shows the turn back instead of a jump that no servo can follow (the
+    pragmatic filter would hold the figure still in its place)."""
+    out = np.array(values, float)
+    ends = list(wraps[1:]) + [out.size - 1]
+    for k, end in zip(wraps, ends):
+        start = out[k - 1]
+        reach = max_speed * dt * np.arange(1, end - k + 2)   # run's length at k..end [rad]
+        met = np.flatnonzero(np.abs(out[k:end + 1] - start) <= reach)
+        if met.size:
+            steps = met[0] + 1
+            out[k:k + met[0]] = start + (out[k + met[0]] - start) * np.arange(1, steps) / steps
+        else:
+            goal = out[end]
+            out[k:end + 1] = start + np.sign(goal - start) * np.minimum(reach, abs(goal - start))
     return out

@@ -64,7 +64,7 @@ class SetCoordinates:
 
 def set_coordinates(points: LedPoints, b: float, nonlinear: bool = False) -> SetCoordinates:
     """Align LED tracks to set times, complement, fit the rucksack (eq. 5.3-5.7)."""
-    t_sets, sets = align_to_set_times(points.times, points.leds, points.points)
+    t_sets, sets = align_to_set_times(points.times, points.leds, points.points, half_side=b)
     filled, n_missing = complement_missing_led(sets)
     fit = fit_nonlinear(filled, b) if nonlinear else fit_linear(filled, b)
     return SetCoordinates(t_sets, filled, n_missing, fit)
@@ -159,7 +159,7 @@ def teach_poses(
     dropped, the last tick is the last one at or before the last set.
     """
     points = led_points(rec, cameras, max_residual_px=max_residual_px)
-    t_sets, sets = align_to_set_times(points.times, points.leds, points.points)
+    t_sets, sets = align_to_set_times(points.times, points.leds, points.points, half_side=b)
     fit = fit_nonlinear if nonlinear else fit_linear
     raw = fit(sets, b).pose
     filled, n_missing = complement_missing_led(sets)

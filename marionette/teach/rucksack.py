@@ -29,11 +29,13 @@ Timing
 The LEDs flash one per 20 ms field in the order 1, 2, 3, 4, so a set spans 80 ms
 (12.5 Hz).  :func:`align_to_set_times` interpolates each LED's 3-D track linearly to
 the common time of every set (by default the mean of its four field times, i.e. the
-LED1 time + 30 ms), removing the up to 60 ms skew between the LEDs of one set.
+LED1 time + 30 ms), removing the up to 60 ms skew between the LEDs of one set, and
+bridges a track across one lost sample where the rucksack's geometry confirms it.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +43,9 @@ import numpy as np
 FIELD_PERIOD = 0.020            # one video field [s]
 SET_PERIOD = 4 * FIELD_PERIOD   # one set of four LEDs [s] (12.5 Hz)
 SET_TIME_OFFSET = 1.5 * FIELD_PERIOD  # mean field time of a set after LED1 [s]
+MAX_SPAN = SET_PERIOD + 0.005   # an LED's samples of neighbouring sets, with timing slack [s]
+MAX_BRIDGE = 2 * SET_PERIOD + 0.010   # across one lost sample [s]
+BRIDGE_TOLERANCE = 0.030        # bridged point: distances to its set's LEDs within [m]
 _SIGNS = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])  # LED1..4 (u1/b, u2/b)
 
 
@@ -213,7 +218,20 @@ def set_times(led1_time: float, n_sets: int, offset: float = SET_TIME_OFFSET) ->
     return led1_time + offset + SET_PERIOD * np.arange(n_sets)
 
 
-def align_to_set_times(times, leds, points, common_times=None, max_span: float = SET_PERIOD + 0.005):
+def _cubic(t, T, X):
+    """Lagrange cubic through samples at times T (n, 4) [s], points X (n, 4, 3) [m],
+    evaluated at times t (n,) [s]."""
+    w = np.ones(T.shape)
+    for a in range(4):
+        for b in range(4):
+            if a != b:
+                w[:, a] *= (t - T[:, b]) / (T[:, a] - T[:, b])
+    return np.einsum("na,nai->ni", w, X)
+
+
+def align_to_set_times(times, leds, points, common_times=None, *, half_side: float | None = None,
+                       max_span: float = MAX_SPAN, max_bridge: float = MAX_BRIDGE,
+                       bridge_tolerance: float = BRIDGE_TOLERANCE):
     """Interpolate each LED's 3-D track to the common time of every set.
 
     ``times`` (M,) [s], ``leds`` (M,) LED numbers 1..4, ``points`` (M, 3) [m] (NaN for a
@@ -222,8 +240,13 @@ def align_to_set_times(times, leds, points, common_times=None, max_span: float =
     An LED's value at time t is the linear interpolation between its nearest valid
     samples before and after t, if those are at most ``max_span`` [s] apart (default:
     neighbouring sets only); otherwise NaN, which the syntactic filter may complement.
-    A single lost sample therefore leaves the LED undefined at the one or two set
-    times it brackets.
+
+    With the rucksack's ``half_side`` b [m], a track is also bridged across one lost
+    sample (its samples at most ``max_bridge`` [s] apart) where its neighbours allow
+    it: with a valid sample within ``max_span`` before and after the gap, the value is
+    the cubic through those four samples, kept only if the rucksack agrees: its
+    distances to the LEDs of its set that were not bridged (at least two) are within
+    ``bridge_tolerance`` [m] of the square's, 2b to a neighbour and 2 sqrt(2) b across.
 
     Returns ``(common_times (K,), points (K, 4, 3))``.
     """
@@ -245,6 +268,7 @@ def align_to_set_times(times, leds, points, common_times=None, max_span: float =
         common_times = set_times(first[0], n)
     tc = np.asarray(common_times, float)
     out = np.full((tc.size, 4, 3), np.nan)
+    bridged = np.full((tc.size, 4, 3), np.nan)      # candidates across one lost sample [m]
     for j in range(4):
         sel = (led == j + 1) & np.all(np.isfinite(X), axis=1)
         tj, Xj = t[sel], X[sel]
@@ -263,6 +287,22 @@ def align_to_set_times(times, leds, points, common_times=None, max_span: float =
         val = (1.0 - w)[:, None] * Xj[loc] + w[:, None] * Xj[hic]
         out[use, j] = val[use]
         out[exact, j] = Xj[hic[exact]]
+        if half_side is None:
+            continue
+        gap = inside & ~use & ~exact & (span <= max_bridge) & (lo >= 1) & (hi + 1 < tj.size)
+        k = np.flatnonzero(gap)
+        idx = lo[k, None] + np.arange(-1, 3)                # (n, 4) two samples either side
+        near = (tj[idx[:, 1]] - tj[idx[:, 0]] <= max_span) & (tj[idx[:, 3]] - tj[idx[:, 2]] <= max_span)
+        bridged[k[near], j] = _cubic(tc[k[near]], tj[idx[near]], Xj[idx[near]])
+    if half_side is not None:
+        side, across = 2.0 * half_side, 2.0 * math.sqrt(2.0) * half_side
+        square = np.array([[0, side, across, side], [side, 0, side, across],
+                           [across, side, 0, side], [side, across, side, 0]])   # LED distances [m]
+        seen = np.isfinite(out[..., 0])                                      # (K, 4)
+        dist = np.linalg.norm(bridged[:, :, None] - out[:, None, :], axis=-1)  # (K, 4, 4) [m]
+        worst = np.max(np.where(seen[:, None, :], np.abs(dist - square), 0.0), axis=2)
+        ok = np.isfinite(bridged[..., 0]) & (seen.sum(axis=1) >= 2)[:, None] & (worst <= bridge_tolerance)
+        out[ok] = bridged[ok]
     return tc, out
 
 

@@ -160,6 +160,56 @@ def test_alignment_removes_strobe_skew():
     np.testing.assert_allclose(fit.pose[:, 0], pose_of_t(tc[inner])[:, 0], atol=1e-3)
 
 
+def _walk_and_turn(t):
+    """Walking at 1.5 m/s while turning at 1 turn / 2 s, bobbing 5 cm at 1.5 Hz."""
+    p = np.zeros((t.size, 6))
+    p[:, 0] = -2 + 1.5 * t
+    p[:, 2] = 1.3 + 0.05 * np.sin(2 * math.pi * 1.5 * t)
+    p[:, 5] = math.pi * t
+    return p
+
+
+def test_alignment_bridges_one_lost_sample():
+    """Every LED loses single samples, one LED of a set at a time, at random: with the
+    rucksack's size each loss is bridged by the cubic through two samples either side
+    (within 3 mm of the truth on this walk and turn); without it the one or two set
+    times around each loss stay NaN. Two losses in a row stay NaN either way."""
+    rng = np.random.default_rng(SEED + 7)
+    times, leds, pts = _strobed(_walk_and_turn, 0.2, 60)
+    lost = np.arange(8, 4 * 60 - 8, 12) + rng.integers(0, 4, 19)   # at most one per set
+    pts[lost] = np.nan
+    tc, plain = align_to_set_times(times, leds, pts)
+    _, sets = align_to_set_times(times, leds, pts, half_side=0.2)
+    truth = led_positions(_walk_and_turn(tc), 0.2)
+    gap = np.isnan(plain[..., 0])
+    gap[:2] = gap[-2:] = False                    # the ends lack a neighbour on one side
+    assert gap.sum() >= lost.size                 # each loss opened one or two set times
+    assert np.all(np.isfinite(sets[gap]))
+    assert np.max(np.linalg.norm(sets[gap] - truth[gap], axis=-1)) < 0.003
+    np.testing.assert_array_equal(sets[~gap][2:-2], plain[~gap][2:-2])
+    pts[lost + 4] = np.nan                       # the same LED's next sample too
+    _, sets = align_to_set_times(times, leds, pts, half_side=0.2)
+    assert np.all(np.isnan(sets[(tc > times[lost[0]]) & (tc < times[lost[0] + 4]), leds[lost[0]] - 1]))
+
+
+def test_bridge_stays_lost_where_the_rucksack_disagrees():
+    """A stray sample next to a loss (8 cm off, as a reflection that passed the
+    triangulation) moves the cubic across the gap by about 4.5 cm: its distances to the
+    LEDs of its set then miss the square by more than the tolerance, and the set time
+    stays NaN; without the check the bridge would have been taken."""
+    times, leds, pts = _strobed(_walk_and_turn, 0.2, 20)
+    k = 4 * 10 + 1                                # LED2 of set 10
+    pts[k] = np.nan
+    centre = _walk_and_turn(times[k - 4:k - 3])[0, :3]
+    outward = (pts[k - 4] - centre) / np.linalg.norm(pts[k - 4] - centre)
+    pts[k - 4] += 0.08 * outward                  # the sample before the loss, astray
+    tc, sets = align_to_set_times(times, leds, pts, half_side=0.2)
+    around = (tc > times[k - 4]) & (tc < times[k + 4])
+    assert around.sum() == 2 and np.all(np.isnan(sets[around, 1]))
+    _, loose = align_to_set_times(times, leds, pts, half_side=0.2, bridge_tolerance=np.inf)
+    assert np.all(np.isfinite(loose[around, 1]))
+
+
 def test_alignment_leaves_long_gaps_open():
     """LED2 (field +20 ms) lost in sets 4 and 5: set times 3, 4, 5 (at +30 ms) have no
     LED2 pair at most 80 ms apart around them and stay NaN; sets 2 and 6 are fine."""

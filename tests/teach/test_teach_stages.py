@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from marionette.bench.led_sets import lost_set_share
 from marionette.teach.filters import complement_missing_led
 from marionette.teach.pipeline import led_points, teach_poses
 from marionette.teach.rucksack import align_to_set_times
@@ -26,7 +27,7 @@ def test_stages_and_counts():
     syn = synthetic_recording(22, 6.0, shade_rate=0.5)
     st = teach_poses(syn.recording, syn.cameras, syn.b)
     pts = led_points(syn.recording, syn.cameras)
-    _, sets = align_to_set_times(pts.times, pts.leds, pts.points)
+    _, sets = align_to_set_times(pts.times, pts.leds, pts.points, half_side=syn.b)
     _, n_missing = complement_missing_led(sets)
     assert st.n_complemented == np.sum(n_missing == 1) > 0
     assert st.n_lost == np.sum(n_missing >= 2) > 0
@@ -40,3 +41,14 @@ def test_stages_and_counts():
     np.testing.assert_array_equal(st.compressed, st.lowpass)      # no compression asked for
     with pytest.raises(ValueError, match="exceeds max_gap"):
         teach_poses(syn.recording, syn.cameras, syn.b, max_gap=0.1)
+
+
+def test_bridging_saves_most_lost_sets():
+    """Single dropped detections (no shading), 3 recordings of 30 s: bridging an LED's
+    track across one lost sample saves over two thirds of the sets that two missing
+    LEDs lose (measured: 2 %: 3.6 % -> 0.6 %, 5 %: 17.2 % -> 4.6 %; the bench,
+    10 recordings of 60 s: 3.5 % -> 0.5 %, 15.9 % -> 3.8 %)."""
+    for dropout, most in ((0.02, 0.01), (0.05, 0.06)):
+        before = lost_set_share(dropout, range(1, 4), 30.0, max_bridge=0.0)
+        after = lost_set_share(dropout, range(1, 4), 30.0)
+        assert after < before / 3 and after < most, (dropout, before, after)

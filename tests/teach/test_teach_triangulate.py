@@ -122,6 +122,29 @@ def test_three_cameras_beat_two():
     assert np.sqrt(np.mean(e3**2)) < 0.9 * np.sqrt(np.mean(e2**2))   # measured ratio 0.80
 
 
+def test_residual_averages_over_the_cameras_that_saw_the_point():
+    """Three cameras, 1 px noise, each point missed by one camera or none: residual_px
+    is the rms of the pixel errors of the cameras that saw it (2 coordinates each), as
+    computed here by projecting the solution; dividing by every camera reads low."""
+    rng = np.random.default_rng(SEED + 8)
+    cams = default_cameras() + [look_at((0.0, 6.0, 3.5), (0, 0, 1.2), L=420)]
+    n = 600
+    X = random_points(rng, n)
+    pix = np.stack([project(c, X) + rng.normal(0, 1.0, (n, 2)) for c in cams])
+    missed_by = rng.integers(-1, len(cams), n)          # -1: every camera saw the point
+    for k in range(len(cams)):
+        pix[k, missed_by == k] = np.nan
+    tri = triangulate(cams, pix, max_residual_px=np.inf)
+    assert np.all(tri.ok)
+    assert np.all(tri.n_cameras == np.where(missed_by < 0, 3, 2))
+    seen = np.all(np.isfinite(pix), axis=-1)                        # (3, n)
+    err = np.stack([project(c, tri.points) for c in cams]) - pix    # (3, n, 2) [pixel]
+    sq = np.sum(np.where(seen[..., None], err, 0.0) ** 2, axis=(0, 2))
+    expected = np.sqrt(sq / (2 * seen.sum(axis=0)))
+    assert np.mean(expected[missed_by >= 0]) > 0.3                  # noisy: not trivially 0
+    np.testing.assert_allclose(tri.residual_px, expected, rtol=1e-9)
+
+
 def test_distorted_cameras():
     rng = np.random.default_rng(SEED + 7)
     cams = [dataclasses.replace(c, q5=0.02, delta=0.01, epsilon=-0.01, rho_max=256 * math.sqrt(2) / c.L)
