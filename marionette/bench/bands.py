@@ -25,6 +25,10 @@ at every offset of the stored piece. Figures per feature and window:
 
 Features: "loudness" (the broadband feature the follower uses today),
 and band loudness with 1, 4, 6 (the default), 8 and 12 bands.
+
+Then the cue's decision on each feature (marionette/bench/bands_cue.py):
+how soon a rule that fits lines through the cue locks on the top decks,
+and whether it locks on the wrong-cue decks.
 """
 from __future__ import annotations
 
@@ -35,6 +39,7 @@ import zlib
 
 import numpy as np
 
+from marionette.bench import bands_cue
 from marionette.bench._machine import describe, machine_info
 from marionette.bench.sync import PIECES, SEED, SEEDS, scenarios
 from marionette.music.bands import bands
@@ -148,6 +153,8 @@ def run(seeds: int = SEEDS, seed: int = SEED, quick: bool = False, progress=None
                     acc[f, secs] += rows
             if progress:
                 progress(f"{sc.name}@{s}")
+    per_deck = bands_cue.collect(pieces, stored, features, range(seed, seed + (1 if quick else seeds)),
+                                 level_db, progress)
     machine = machine_info()
     results = []
     for (f, secs), rows in acc.items():
@@ -155,22 +162,34 @@ def run(seeds: int = SEEDS, seed: int = SEED, quick: bool = False, progress=None
         lead = np.array([r[1] for r in rows])
         true = np.array([r[2] for r in rows])
         clean = np.array([r[0] for r in ceiling[f, secs]], dtype=bool)
-        results.append({"feature": f, "window_s": secs, "windows": len(rows),
+        results.append({"section": "identify", "feature": f, "window_s": secs, "windows": len(rows),
                         "identified_clean": float(clean.mean()) if len(clean) else float("nan"),
                         "identified": float(ok.mean()) if len(ok) else float("nan"),
                         "lead_z_median": float(np.median(lead)) if len(lead) else float("nan"),
                         "lead_z_p10": float(np.percentile(lead, 10)) if len(lead) else float("nan"),
                         "true_corr_median": float(np.median(true)) if len(true) else float("nan"),
                         "machine": machine})
+    results += [{**r, "machine": machine} for r in bands_cue.summarize(per_deck, features, fisher)]
     return results
 
 
 def format_table(results: list[dict]) -> str:
-    lines = [f"{'feature':<10} {'window_s':>8} {'windows':>7} {'identified':>10} {'clean':>6} "
+    lines = ["what 0.5-2 s of live music tells apart (identified: its true place beats every other; "
+             "clean: the same, heard as stored)",
+             f"{'feature':<10} {'window_s':>8} {'windows':>7} {'identified':>10} {'clean':>6} "
              f"{'lead_z med':>10} {'lead_z p10':>10} {'true_corr':>9}"]
-    for r in results:
+    for r in (r for r in results if r["section"] == "identify"):
         lines.append(f"{r['feature']:<10} {r['window_s']:>8g} {r['windows']:>7d} {r['identified']:>10.1%} {r['identified_clean']:>6.0%} "
                      f"{r['lead_z_median']:>10.2f} {r['lead_z_p10']:>10.2f} {r['true_corr_median']:>9.2f}")
+    cue = [r for r in results if r["section"] == "cue"]
+    if cue:
+        lines += ["", f"the cue's decision (a line through the cue beats every other place by lead_z; "
+                      f"top decks: {cue[0]['decks_top']}, wrong-cue decks: {cue[0]['decks_wrong']})",
+                  f"{'feature':<10} {'lead_z':>6} {'locked by 0.5 s':>15} {'lock_s med':>10} "
+                  f"{'bad locks':>9} {'false (wrong cue)':>17}"]
+        for r in cue:
+            lines.append(f"{r['feature']:<10} {r['lead_z']:>6.1f} {r['locked_by_0_5s']:>15.0%} "
+                         f"{r['lock_s_median']:>10.2f} {r['bad_locks']:>9d} {r['wrong_false_locks']:>17d}")
     if results:
         lines.append(describe(results[0]["machine"]))
     return "\n".join(lines)
