@@ -20,6 +20,7 @@ import numpy as np
 
 from marionette.config import load_config
 from marionette.errors import TeachError
+from marionette.music.bands import wav_bands
 from marionette.music.feature import wav_frames
 from marionette.progress import Progress
 from marionette.shape import POLICIES, shape_show
@@ -156,6 +157,8 @@ def _teach(args, progress: Progress) -> int:
     music_frames = loud.size
     show.loudness = np.concatenate([loud[:n], np.zeros(max(0, n - loud.size))])
     show.onsets = np.concatenate([onset[:n], np.zeros(max(0, n - onset.size))])
+    band_rows = wav_bands(args.music, period=config.tick_period)
+    show.bands = np.concatenate([band_rows[:n], np.zeros((max(0, n - len(band_rows)), band_rows.shape[1]))])
 
     progress.step("writing")
     extra = {"stage_names": np.array([k for k, _, _ in STAGES]),

@@ -35,6 +35,8 @@ class Show:
     first_line: int = 0              # CSV line of tick 0 (0: not from a CSV)
     changes: list[str] = field(default_factory=list)  # what fitting to a figure changed
     onsets: np.ndarray | None = None  # (ticks,) stored onset strength [dB], >= 0; None: not stored
+    bands: np.ndarray | None = None   # (ticks, bands) stored band loudness [full scale], >= 0
+                                      # (marionette/music/bands.py); None: not stored
 
     @property
     def n_ticks(self) -> int:
@@ -58,7 +60,8 @@ class Show:
         """Write as CSV or NPZ, by the file's suffix."""
         path = Path(path)
         if path.suffix == ".npz":
-            extra = {} if self.onsets is None else {"onsets": self.onsets}
+            extra = {name: value for name, value in (("onsets", self.onsets), ("bands", self.bands))
+                     if value is not None}
             np.savez_compressed(path, positions=self.positions, loudness=self.loudness,
                                 axis_names=np.array(self.axis_names), units=np.array(self.units),
                                 tick_period=np.float64(self.tick_period),
@@ -164,7 +167,8 @@ def _read_npz(path: Path) -> Show:
                         tick_period=float(z["tick_period"]) if "tick_period" in z.files else 0.02,
                         source=str(z["source"]) if "source" in z.files else "",
                         music=str(z["music"]) if "music" in z.files else "", path=str(path),
-                        onsets=np.array(z["onsets"], dtype=np.float64) if "onsets" in z.files else None)
+                        onsets=np.array(z["onsets"], dtype=np.float64) if "onsets" in z.files else None,
+                        bands=np.array(z["bands"], dtype=np.float64) if "bands" in z.files else None)
     except (OSError, ValueError) as exc:
         if isinstance(exc, ShowError):
             raise
@@ -204,6 +208,14 @@ def validate(show: Show) -> None:
             k = bad[0]
             raise ShowError(f"{show.locate(k)}: {ONSET_COLUMN} {float(show.onsets[k])!r} "
                             "must be finite and >= 0")
+    if show.bands is not None:
+        b = show.bands
+        if b.ndim != 2 or b.shape[0] != p.shape[1] or not 1 <= b.shape[1] <= 32:
+            raise ShowError(f"{show.path}: bands have shape {b.shape}, expected ({p.shape[1]} ticks, 1 to 32 bands)")
+        bad = np.argwhere(~(np.isfinite(b) & (b >= 0)))
+        if bad.size:
+            k, j = bad[0]
+            raise ShowError(f"{show.locate(k)}: band {j} loudness {float(b[k, j])!r} must be finite and >= 0")
 
 
 def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") -> Show:

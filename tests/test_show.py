@@ -20,6 +20,8 @@ def test_round_trip_many_random_shows(tmp_path, rng, suffix):
         show.source, show.music = f"case {case}", "song, live.wav"
         if case % 2:                                  # taught from a recording: onsets stored too
             show.onsets = rng.uniform(0, 30, ticks)
+        if case % 3 == 0:                             # ... and band loudness (NPZ only)
+            show.bands = rng.uniform(0, 1, (ticks, int(rng.integers(1, 9))))
         path = tmp_path / f"s{case}{suffix}"
         show.save(path)
         back = load_show(path, config)
@@ -29,6 +31,10 @@ def test_round_trip_many_random_shows(tmp_path, rng, suffix):
             np.testing.assert_array_equal(back.onsets, show.onsets)
         else:
             assert back.onsets is None
+        if case % 3 == 0 and suffix == ".npz":
+            np.testing.assert_array_equal(back.bands, show.bands)
+        else:
+            assert back.bands is None                 # a CSV show carries no bands
         assert back.axis_names == show.axis_names and back.units == show.units
         assert (back.tick_period, back.source, back.music) == (0.02, show.source, show.music)
 
@@ -131,3 +137,13 @@ def test_npz_errors(tmp_path):
     show.save(tmp_path / "nan.npz")
     with pytest.raises(ShowError, match=r"nan.npz, tick 7: axis 'a1' has value nan"):
         load_show(tmp_path / "nan.npz")
+    show.positions[1, 7] = 0.0
+    show.bands = np.ones((10, 6))
+    show.bands[4, 2] = -1.0
+    show.save(tmp_path / "band.npz")
+    with pytest.raises(ShowError, match=r"band.npz, tick 4: band 2 loudness -1.0 must be finite and >= 0"):
+        load_show(tmp_path / "band.npz")
+    show.bands = np.ones((9, 6))
+    show.save(tmp_path / "short.npz")
+    with pytest.raises(ShowError, match=r"short.npz: bands have shape \(9, 6\), expected \(10 ticks"):
+        load_show(tmp_path / "short.npz")

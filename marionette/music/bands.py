@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from marionette.music.feature import BAND, FRAME_PERIOD, LoudnessMeter, mono
+from marionette.music.feature import BAND, FRAME_PERIOD, AudioError, LoudnessMeter, mono, read_wav
 
 N_BANDS = 6                 # bands between BAND[0] and BAND[1]: an octave apart [1]
 WINDOW_FRAMES = 4           # analysis window [frames]: 80 ms, bins 12.5 Hz apart
@@ -118,6 +118,15 @@ class BandMeter(LoudnessMeter):
 def bands(samples, sample_rate: float, period: float = FRAME_PERIOD, n_bands: int = N_BANDS) -> np.ndarray:
     """Band loudness rows of a whole recording [full scale], (frames, n_bands)."""
     return BandMeter(sample_rate, period, n_bands).feed(samples)
+
+
+def wav_bands(path, period: float = FRAME_PERIOD, n_bands: int = N_BANDS) -> np.ndarray:
+    """Band loudness rows of an audio file [full scale], (frames, n_bands)."""
+    x, rate = read_wav(path)
+    try:
+        return bands(x, rate, period, n_bands)
+    except AudioError as exc:
+        raise AudioError(f"{path}: {exc}") from None
 
 
 def window_correlation(live_db: np.ndarray, stored_db: np.ndarray) -> float:

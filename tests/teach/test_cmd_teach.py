@@ -8,6 +8,7 @@ import pytest
 import taught_show
 from marionette import cli
 from marionette.config import load_config
+from marionette.music.bands import N_BANDS, wav_bands
 from marionette.music.feature import wav_frames, wav_loudness, write_wav
 from marionette.progress import Progress
 from marionette.show import load_show
@@ -88,6 +89,9 @@ def test_shaped_show_plays_and_carries_the_music(taught):
     # and its onset strength beside it (the engine's follower tracks on both)
     onset = wav_frames(taught.directory / "music.wav")[1]
     np.testing.assert_array_equal(show.onsets, onset[:show.n_ticks])
+    # and its band loudness (marionette/music/bands.py), for the next follower
+    np.testing.assert_array_equal(show.bands, wav_bands(taught.directory / "music.wav")[:show.n_ticks])
+    assert show.bands.shape == (show.n_ticks, N_BANDS)
     assert show.music == str(taught.directory / "music.wav")
     assert show.source.startswith("teach-in of") and "shaped" in show.source
     # the pragmatic filter keeps the servo limits and stays near the dance
