@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from marionette.config import load_config
-from marionette.errors import TeachError
+from marionette.errors import ArgumentError, TeachError
 from marionette.music.feature import wav_frames
 from marionette.progress import Progress
 from marionette.shape import POLICIES, shape_show
@@ -175,7 +175,7 @@ def save_with_extras(show: Show, path, extra: dict) -> None:
         arrays = {k: z[k] for k in z.files}
     clash = set(arrays) & set(extra)
     if clash:
-        raise ValueError(f"extra arrays {sorted(clash)} would replace show arrays")
+        raise ArgumentError(f"extra arrays {sorted(clash)} would replace show arrays")
     arrays.update(extra)
     np.savez_compressed(path, **arrays)
 

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from marionette.errors import ArgumentError
+
 MAGIC = b"MARIONETTE-FLIGHT 1 "
 
 
@@ -70,11 +72,11 @@ def read_flight_record(path: str | Path) -> tuple[dict, np.ndarray]:
     with open(path, "rb") as f:
         line = f.readline()
         if not line.startswith(MAGIC):
-            raise ValueError(f"{path}: not a marionette flight record (bad first line)")
+            raise ArgumentError(f"{path}: not a marionette flight record (bad first line)")
         meta = json.loads(line[len(MAGIC):])
         dtype = record_dtype(len(meta["axis_names"]))
         raw = f.read()
     if len(raw) % dtype.itemsize:
-        raise ValueError(f"{path}: {len(raw)} bytes of records is not a whole number of "
-                         f"{dtype.itemsize}-byte records (file cut short?)")
+        raise ArgumentError(f"{path}: {len(raw)} bytes of records is not a whole number of "
+                            f"{dtype.itemsize}-byte records (file cut short?)")
     return meta, np.frombuffer(raw, dtype=dtype)

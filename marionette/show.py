@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from marionette.config import UNITS, FigureConfig
-from marionette.errors import ShowError
+from marionette.errors import ArgumentError, ShowError
 
 CSV_MAGIC = "# marionette show 1"
 ONSET_COLUMN = "onset_db"       # optional CSV column after loudness: the stored onset strength [dB]
@@ -215,7 +215,7 @@ def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") ->
     the returned show's ``changes``.
     """
     if on_limits not in LIMIT_POLICIES:
-        raise ValueError(f"on_limits must be one of {LIMIT_POLICIES}, not {on_limits!r}")
+        raise ArgumentError(f"on_limits must be one of {LIMIT_POLICIES}, not {on_limits!r}")
     if not math.isclose(show.tick_period, config.tick_period, rel_tol=1e-9):
         raise ShowError(f"{show.path}: tick_period {show.tick_period!r} s does not match "
                         f"{config.source}: {config.tick_period!r} s")

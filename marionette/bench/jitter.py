@@ -53,6 +53,7 @@ from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
 from marionette.show import load_show
+from marionette.errors import ArgumentError, MarionetteError
 
 PRIORITY = 80             # SCHED_FIFO priority of the tick thread and of cyclictest [1..99]
 SECONDS = 20.0            # length of each kind of run, all rounds together [s]
@@ -99,7 +100,7 @@ def _engine_run(ticks: int, priority: int, lock_memory: bool, churn: int = 0,
                                   max_ticks=ticks)
         period = config.tick_period               # [s]
         if not engine.wait(timeout=ticks * period + 30.0):
-            raise RuntimeError("the real-time loop did not finish its ticks in time")
+            raise MarionetteError("the real-time loop did not finish its ticks in time")
         stats = engine.stats()
         histogram = engine.histogram("wake")
     finally:
@@ -132,8 +133,8 @@ def _cyclictest_run(ticks: int, period: float, priority: int, lock_memory: bool,
         + ([] if cpu is None else ["-a", str(cpu)])
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=ticks * period + 60.0)
     if done.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed with status {done.returncode}: "
-                           f"{done.stderr.strip() or done.stdout.strip()}")
+        raise MarionetteError(f"{' '.join(cmd)} failed with status {done.returncode}: "
+                              f"{done.stderr.strip() or done.stdout.strip()}")
     samples, summary = [], None
     for line in done.stdout.splitlines():
         m = _SAMPLE.match(line)
@@ -143,7 +144,7 @@ def _cyclictest_run(ticks: int, period: float, priority: int, lock_memory: bool,
             summary = {"count": int(m.group(1)), "min_ns": int(m.group(2)),
                        "avg_ns": int(m.group(3)), "max_ns": int(m.group(4))}
     if not samples:
-        raise RuntimeError(f"{' '.join(cmd)} printed no latencies:\n{done.stdout[-2000:]}")
+        raise MarionetteError(f"{' '.join(cmd)} printed no latencies:\n{done.stdout[-2000:]}")
     ns = np.sort(np.array(samples, dtype=np.int64))          # [ns]
     peak = max(float(ns[-1]), float(summary["max_ns"]) if summary else 0.0)
     return {

@@ -39,6 +39,7 @@ from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
 from marionette.show import load_show
+from marionette.errors import ArgumentError, MarionetteError
 
 PRIORITY = 40           # SCHED_FIFO of the engine, when permitted
 SIM_PRIORITY = 30       # and of the simulator
@@ -51,7 +52,7 @@ def _start_sim(args: list[str]) -> tuple[subprocess.Popen, dict]:
     ready = json.loads(proc.stdout.readline() or "{}")
     if not ready.get("ready"):
         proc.kill()
-        raise RuntimeError(f"simulator did not start: {proc.stderr.read()}")
+        raise MarionetteError(f"simulator did not start: {proc.stderr.read()}")
     return proc, ready
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from marionette._core import plan_move
 from marionette.bench._machine import describe, machine_info
+from marionette.errors import ArgumentError, MarionetteError
 
 CASES = 10_000
 SEED = 20261122
@@ -60,7 +61,7 @@ def ruckig_duration(otg, inp, traj, case) -> float:
     inp.max_velocity, inp.max_acceleration, inp.max_jerk = [vmax], [amax], [float("inf")]
     result = otg.calculate(inp, traj)
     if result not in (Result.Working, Result.Finished):
-        raise RuntimeError(f"ruckig failed on {case}: {result}")
+        raise MarionetteError(f"ruckig failed on {case}: {result}")
     return traj.duration
 
 

@@ -8,6 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from marionette.errors import ArgumentError
+
 
 @dataclass
 class Faults:
@@ -48,7 +50,7 @@ class Faults:
         Returns what changed, or raises ValueError."""
         words = command.split()
         if len(words) != 2:
-            raise ValueError(f"fault command {command!r}: expected '<name> <value>'")
+            raise ArgumentError(f"fault command {command!r}: expected '<name> <value>'")
         name, value = words
         if name in ("silence", "resume"):
             node = int(value)
@@ -56,12 +58,12 @@ class Faults:
             return f"node {node} {'silenced' if name == 'silence' else 'resumed'}"
         number = float(value)
         if not np.isfinite(number) or number < 0:
-            raise ValueError(f"fault command {command!r}: value must be finite and >= 0")
+            raise ArgumentError(f"fault command {command!r}: value must be finite and >= 0")
         attr = {"drop": "drop_rate", "corrupt": "corrupt_rate", "delay": "delay",
                 "noise": "position_noise"}.get(name)
         if attr is None:
-            raise ValueError(f"fault command {command!r}: unknown fault {name!r}")
+            raise ArgumentError(f"fault command {command!r}: unknown fault {name!r}")
         if attr.endswith("rate") and number > 1:
-            raise ValueError(f"fault command {command!r}: a rate is at most 1")
+            raise ArgumentError(f"fault command {command!r}: a rate is at most 1")
         setattr(self, attr, number)
         return f"{attr} = {number:g}"

@@ -29,6 +29,8 @@ from typing import Mapping
 
 import numpy as np
 
+from marionette.errors import ArgumentError
+
 
 @dataclass
 class Winch:
@@ -92,7 +94,7 @@ class AxisMap:
         names = self.axis_names()
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise ValueError(f"axis names must be unique; duplicated: {dup}")
+            raise ArgumentError(f"axis names must be unique; duplicated: {dup}")
 
     def axis_names(self) -> list[str]:
         """All output axis names, in output order."""
@@ -120,7 +122,7 @@ class AxisMap:
         known = {f for f in cls.__dataclass_fields__}
         unknown = sorted(set(data) - known)
         if unknown:
-            raise ValueError(f"unknown axis map key(s) {unknown}; known: {sorted(known)}")
+            raise ArgumentError(f"unknown axis map key(s) {unknown}; known: {sorted(known)}")
         if "winches" in data:
             data["winches"] = [_build(Winch, w, "attach") for w in data["winches"]]
         if "lights" in data:
@@ -131,11 +133,11 @@ class AxisMap:
 def _build(kind, item: Mapping, vector_key: str):
     unknown = sorted(set(item) - set(kind.__dataclass_fields__))
     if unknown:
-        raise ValueError(f"unknown {kind.__name__} key(s) {unknown}")
+        raise ArgumentError(f"unknown {kind.__name__} key(s) {unknown}")
     item = dict(item)
     vec = tuple(float(v) for v in item[vector_key])
     if len(vec) != 3:
-        raise ValueError(f"{kind.__name__} {vector_key} must have 3 entries [m], got {vec}")
+        raise ArgumentError(f"{kind.__name__} {vector_key} must have 3 entries [m], got {vec}")
     item[vector_key] = vec
     return kind(**item)
 
@@ -145,9 +147,9 @@ def map_axes(pose, config: AxisMap | None = None) -> dict[str, np.ndarray]:
     config = AxisMap() if config is None else config
     q = np.asarray(pose, float)
     if q.ndim != 2 or q.shape[1] != 6:
-        raise ValueError(f"pose must have shape (K, 6), got {q.shape}")
+        raise ArgumentError(f"pose must have shape (K, 6), got {q.shape}")
     if not np.all(np.isfinite(q)):
-        raise ValueError("pose contains NaN/inf; bridge gaps before mapping to axes")
+        raise ArgumentError("pose contains NaN/inf; bridge gaps before mapping to axes")
     x0, y0, z0, phi, theta, psi = q.T
     z_ref = float(np.mean(z0)) if config.z_ref is None else float(config.z_ref)
     lift = config.z_gain * (z0 - z_ref)                  # vertical displacement [m]

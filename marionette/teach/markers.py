@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from marionette.errors import LineError
+from marionette.errors import ArgumentError, LineError
 
 HEADER = ("camera", "marker", "x", "y", "z", "R", "T")
 
@@ -109,8 +109,8 @@ def parse_markers(lines, path="<markers>") -> list[CameraMarkers]:
     n = max(per_camera) + 1
     missing = [k for k in range(n) if k not in per_camera]
     if missing:
-        raise ValueError(f"{path}: camera {missing[0]} has no markers "
-                         f"(cameras are numbered 0..{n - 1} without gaps)")
+        raise ArgumentError(f"{path}: camera {missing[0]} has no markers "
+                            f"(cameras are numbered 0..{n - 1} without gaps)")
     return [per_camera[k] for k in range(n)]
 
 

@@ -51,11 +51,12 @@ from pathlib import Path
 from .axis_map import AxisMap
 from .filters import DEFAULT_CUTOFF, SoftLimit, soft_limit_for_areas
 from .triangulate import DEFAULT_MAX_RESIDUAL_PX
+from marionette.errors import ArgumentError, MarionetteError
 
 FITS = ("linear", "nonlinear")
 
 
-class SettingsError(ValueError):
+class SettingsError(MarionetteError, ValueError):
     """Invalid teach settings; the message names the file and key."""
 
 
@@ -139,7 +140,7 @@ def settings_from_dict(data: dict, source: str = "<memory>") -> TeachSettings:
         settings = TeachSettings(**values, source=source)
         if "map" in data:
             if not isinstance(data["map"], dict):
-                raise ValueError("[map] must be a table")
+                raise ArgumentError("[map] must be a table")
             settings.axis_map = AxisMap.from_dict(data["map"])
         settings.compress(0)                       # checks the area keys
     except (ValueError, TypeError) as exc:
