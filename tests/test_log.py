@@ -9,7 +9,7 @@ import pytest
 
 from conftest import run_cli
 from marionette import _core
-from marionette.cmd_log import FLAGS, limited_by_axis
+from marionette.cli.log import FLAGS, limited_by_axis
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.music.feature import wav_frames

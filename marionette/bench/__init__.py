@@ -8,7 +8,8 @@
 - ``marionette.bench.reference``: the numpy reference tick (benchmarks and
   tests only; the engine itself never runs it).
 
-Each benchmark module has ``run(...)`` (returns plain data) and ``main(argv)``
-(argparse; prints a table, or JSON with ``--json``), so the CLI dispatches
-``marionette bench tick ...`` to ``marionette.bench.tick.main(argv)``.
+Each benchmark module has ``collect(...)`` (returns plain data), and for
+``marionette bench NAME`` (marionette/cli/bench.py) ``register(subparsers)``
+and ``run(args)`` (prints a table, or JSON with ``--json``); ``main(argv)``
+runs it as ``python -m marionette.bench.NAME``.
 """

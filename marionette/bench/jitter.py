@@ -36,7 +36,6 @@ printed (and is in the JSON as "gil_p99_change_us").
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import re
@@ -213,9 +212,9 @@ def check_targets(result: dict) -> list[tuple[str, str, bool | None]]:
     return out
 
 
-def run(seconds: float = SECONDS, priority: int = PRIORITY, lock_memory: bool = True,
-        cyclictest: str | None = "cyclictest", churn_threads: int = CHURN_THREADS,
-        cpu: int | None = None, rounds: int = ROUNDS) -> dict:
+def collect(seconds: float = SECONDS, priority: int = PRIORITY, lock_memory: bool = True,
+            cyclictest: str | None = "cyclictest", churn_threads: int = CHURN_THREADS,
+            cpu: int | None = None, rounds: int = ROUNDS) -> dict:
     """The three kinds of run (see the module docstring), seconds [s] each
     in all, interleaved in rounds; cpu pins the tick thread and cyclictest
     to that CPU (None: not pinned)."""
@@ -297,9 +296,9 @@ def format_table(result: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="marionette bench jitter",
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "jitter", help="wake latency of the real-time loop, beside cyclictest",
         description="Wake latency [us] of the real-time loop, beside cyclictest at the same "
                     "period and priority, and under Python threads loading the GIL.")
     parser.add_argument("--seconds", type=float, default=SECONDS, metavar="N",
@@ -317,12 +316,14 @@ def main(argv=None) -> int:
                         help=f"interleave the runs in R rounds (default {ROUNDS})")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
-    args = parser.parse_args(argv)
+
+
+def run(args) -> int:
     if not args.seconds > 0:
-        parser.error("--seconds must be > 0")
+        raise MarionetteError("--seconds must be > 0")
     if not 1 <= args.priority <= 99:
-        parser.error("--priority must be 1..99")
-    result = run(args.seconds, args.priority, not args.no_mlock,
+        raise MarionetteError("--priority must be 1..99")
+    result = collect(args.seconds, args.priority, not args.no_mlock,
                  None if args.no_cyclictest else args.cyclictest, cpu=args.cpu,
                  rounds=max(1, args.rounds))
     if args.json:
@@ -331,6 +332,12 @@ def main(argv=None) -> int:
     else:
         print(format_table(result))
     return 1 if args.strict and any(ok is False for ok in result["targets"].values()) else 0
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.jitter``: as ``marionette bench jitter``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "jitter", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

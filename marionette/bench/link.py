@@ -21,7 +21,6 @@ decode_frames_per_s, decode_mb_per_s, crc32_mb_per_s, decode_vs_crc32},
 """
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -139,12 +138,26 @@ def format_report(r: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="marionette bench link", description=__doc__.split("\n\n")[0])
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "link", help="latency from the tick to a decoded frame in the simulator; codec rates",
+        description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=5.0, help="real-time run per link [s]")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
-    args = parser.parse_args(argv)
+
+
+def run(args) -> int:
     report = {"links": [link_latency(kind, args.seconds) for kind in ("serial", "can")],
               "codec": codec_rates(), "machine": machine_info()}
     print(json.dumps(report, indent=2) if args.json else format_report(report))
     return 0
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.link``: as ``marionette bench link``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "link", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

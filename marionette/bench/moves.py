@@ -13,8 +13,8 @@ Ruckig comes with the `bench` extra (pip install 'marionette[bench]').
 """
 from __future__ import annotations
 
-import argparse
 import json
+import sys
 import time
 
 import numpy as np
@@ -99,7 +99,7 @@ def compare_with_ruckig(cases: np.ndarray) -> dict:
     return out
 
 
-def run(cases: int = CASES, seed: int = SEED, quick: bool = False) -> dict:
+def collect(cases: int = CASES, seed: int = SEED, quick: bool = False) -> dict:
     result = compare_with_ruckig(random_cases(cases, seed))
     from marionette.bench.climax import climax_timing
     result.update(climax_timing(seed=seed, seconds=10.0) if quick else climax_timing(seed=seed))
@@ -108,15 +108,19 @@ def run(cases: int = CASES, seed: int = SEED, quick: bool = False) -> dict:
     return result
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="marionette bench moves", description=__doc__.split("\n\n")[0])
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "moves", help="online moves against Ruckig, limit violations, climax timing",
+        description=__doc__.split("\n\n")[0])
     parser.add_argument("--cases", type=int, default=CASES, help="random move cases")
     parser.add_argument("--seed", type=int, default=SEED)
     parser.add_argument("--quick", action="store_true", help="small counts, for tests")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--strict", action="store_true", help="exit 1 when a target fails")
-    args = parser.parse_args(argv)
-    result = run(200 if args.quick else args.cases, args.seed, args.quick)
+
+
+def run(args) -> int:
+    result = collect(200 if args.quick else args.cases, args.seed, args.quick)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -136,3 +140,13 @@ def main(argv=None) -> int:
         for label, ok in r["targets"].items():
             print(f"  target {label:<45} {'PASS' if ok else 'FAIL'}")
     return 1 if args.strict and not all(result["targets"].values()) else 0
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.moves``: as ``marionette bench moves``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "moves", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

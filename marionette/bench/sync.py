@@ -79,7 +79,6 @@ CUE_TARGETS hold for the "cue at top" rows, WRONG_CUE_TARGETS for the
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -92,6 +91,7 @@ from marionette.music.feature import FRAME_PERIOD, loudness, onsets
 from marionette.music.follower import STATES, Follower, sync_ticks
 from marionette.sim.music import synthesize
 from marionette.sim.tape import Deck, play
+from marionette.errors import MarionetteError
 
 T = FRAME_PERIOD                # tick period [s]
 SEED = 20261122
@@ -309,8 +309,8 @@ def check_targets(result: dict, targets=TARGETS) -> list[tuple[str, float, bool]
     return out
 
 
-def run(seconds: float | None = None, quick: bool = False, seed: int = SEED, progress=None,
-        seeds: int = SEEDS) -> list[dict]:
+def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED, progress=None,
+            seeds: int = SEEDS) -> list[dict]:
     """One result per mode (smooth, paper) with the documented keys, over
     the scenarios of seeds seed, seed + 1, ... (seeds of them), then one
     per set of the cue's runs (smooth mode): "cue at top", "top, unknown",
@@ -545,9 +545,9 @@ def _cue_lines(by_set: dict) -> list[str]:
     return lines
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="marionette bench sync",
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "sync", help="music following against ground truth (simulated tape deck)",
         description="Music following against ground truth: synthesized pieces played through a "
                     "simulated tape deck, smooth and paper mode side by side.")
     parser.add_argument("--json", action="store_true",
@@ -563,13 +563,15 @@ def main(argv=None) -> int:
     parser.add_argument("--seeds", type=int, default=SEEDS, metavar="N",
                         help=f"sets of scenarios, seeds SEED to SEED + N - 1 (default {SEEDS}): "
                              "tuning to one set does not pass")
-    args = parser.parse_args(argv)
+
+
+def run(args) -> int:
     if args.seconds is not None and not args.seconds >= 10.0:
-        parser.error("--seconds must be at least 10")
+        raise MarionetteError("--seconds must be at least 10")
     progress = None if args.json else (lambda msg: print(f"  {msg}", file=sys.stderr, flush=True))
     if args.seeds < 1:
-        parser.error("--seeds must be at least 1")
-    results = run(args.seconds, args.quick, args.seed, progress, 1 if args.quick else args.seeds)
+        raise MarionetteError("--seeds must be at least 1")
+    results = collect(args.seconds, args.quick, args.seed, progress, 1 if args.quick else args.seeds)
     if args.json:
         json.dump(results, sys.stdout, indent=2, default=float)
         sys.stdout.write("\n")
@@ -577,6 +579,12 @@ def main(argv=None) -> int:
         print(format_table(results))
     failed = any(not ok for res in results if res["mode"] == "smooth" for ok in res["targets"].values())
     return 1 if args.strict and failed else 0
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.sync``: as ``marionette bench sync``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "sync", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

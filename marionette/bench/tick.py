@@ -25,7 +25,6 @@ targets, machine).
 """
 from __future__ import annotations
 
-import argparse
 import gc
 import json
 import sys
@@ -38,6 +37,7 @@ from marionette.bench.reference import ReferenceEngine
 from marionette.config import FigureConfig, config_from_dict
 from marionette.engine import Engine
 from marionette.show import Show
+from marionette.errors import MarionetteError
 
 SIZES = (16, 256, 4096)                                 # axes
 DEFAULT_TICKS = {16: 20000, 256: 20000, 4096: 5000}     # ticks per size
@@ -171,7 +171,7 @@ def check_targets(rows: list[dict]) -> list[tuple[str, float, bool]]:
     return out
 
 
-def run(sizes=SIZES, ticks: int | None = None, quick: bool = False, seed: int = SEED) -> list[dict]:
+def collect(sizes=SIZES, ticks: int | None = None, quick: bool = False, seed: int = SEED) -> list[dict]:
     """Rows for each axis count (see the module docstring); ticks overrides
     the per-size defaults, quick uses tiny counts (smoke tests)."""
     machine = machine_info()
@@ -209,9 +209,9 @@ def format_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="marionette bench tick",
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "tick", help="compute time per tick, C engine vs the numpy reference",
         description="Compute time per tick [us] of the C engine in step mode, against the "
                     "numpy reference tick, for 16, 256 and 4096 axes.")
     parser.add_argument("--json", action="store_true",
@@ -224,10 +224,12 @@ def main(argv=None) -> int:
                         help="ticks per axis count (default: 20000 for 16 and 256 axes, 5000 for 4096)")
     parser.add_argument("--seed", type=int, default=SEED, help="seed of the synthetic figure and show")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
-    args = parser.parse_args(argv)
+
+
+def run(args) -> int:
     if any(n < 1 for n in args.axes) or (args.ticks is not None and args.ticks < 1):
-        parser.error("axis counts and ticks must be >= 1")
-    rows = run(args.axes, args.ticks, args.quick, args.seed)
+        raise MarionetteError("axis counts and ticks must be >= 1")
+    rows = collect(args.axes, args.ticks, args.quick, args.seed)
     if args.json:
         json.dump(rows, sys.stdout, indent=2)
         sys.stdout.write("\n")
@@ -235,6 +237,12 @@ def main(argv=None) -> int:
         print(format_table(rows))
     failed = any(not ok for row in rows for ok in row.get("targets", {}).values())
     return 1 if args.strict and failed else 0
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.tick``: as ``marionette bench tick``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "tick", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -42,7 +42,7 @@ def register(sub) -> None:
     p.add_argument("--priority", type=int, default=0,
                    help="run at this SCHED_FIFO priority when permitted (0: normal), so the "
                         "simulated nodes keep time on a busy machine")
-    p.set_defaults(run=cmd_sim)
+    p.set_defaults(run=run)
 
 
 def control_stdin(stdin) -> bool:
@@ -58,11 +58,11 @@ def control_stdin(stdin) -> bool:
     return stat.S_ISFIFO(mode) or stat.S_ISSOCK(mode) or stdin.isatty()
 
 
-def cmd_sim(args) -> int:
+def run(args) -> int:
     from marionette.sim.faults import Faults
     from marionette.sim.figure import SimFigure
     from marionette.sim.node import DEFAULT_WATCHDOG_TICKS
-    from marionette.sim.server import SerialFrontEnd, SlcanFrontEnd, UdpFrontEnd, run
+    from marionette.sim.server import SerialFrontEnd, SlcanFrontEnd, UdpFrontEnd, run as serve
 
     config = load_config(args.config)
     if args.priority:
@@ -87,7 +87,7 @@ def cmd_sim(args) -> int:
         front = UdpFrontEnd(args.channel)
     else:
         front = SerialFrontEnd()
-    summary = run(figure, front, faults, seconds=args.seconds, trace_path=args.trace,
+    summary = serve(figure, front, faults, seconds=args.seconds, trace_path=args.trace,
                   control=sys.stdin if control_stdin(sys.stdin) else None)
     print(json.dumps({"summary": summary}), flush=True)
     return 0

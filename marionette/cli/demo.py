@@ -47,7 +47,7 @@ def register(sub) -> None:
                    help="no live console: one status line per second on stderr (also whenever "
                         "stdout is not a terminal)")
     p.add_argument("--json", action="store_true", help="the status lines as JSON lines (headless)")
-    p.set_defaults(run=cmd_demo)
+    p.set_defaults(run=run)
 
 
 def teach_sample(directory: Path) -> Path:
@@ -173,7 +173,7 @@ def _terminated(signum, frame):
     raise SystemExit(128 + signum)        # 143: the finally clauses stop the simulator
 
 
-def cmd_demo(args) -> int:
+def run(args) -> int:
     if threading.current_thread() is not threading.main_thread():
         return _demo(args)
     old = signal.signal(signal.SIGTERM, _terminated)  # play's view takes it over during the show
@@ -184,7 +184,7 @@ def cmd_demo(args) -> int:
 
 
 def _demo(args) -> int:
-    from marionette.cli import build_parser, cmd_play
+    from marionette.cli import build_parser, play
     from marionette.config import load_config
     from marionette.teach.make_sample import sample_path
     if not args.duration > 0:
@@ -207,7 +207,7 @@ def _demo(args) -> int:
                 argv += ["--headless"] * args.headless + ["--json"] * args.json
                 print(f"demo: play --realtime --link serial:{sim.path} --music SAMPLE/music.wav "
                       f"--ticks {ticks} ({ticks * period:g} s of show)", flush=True)
-                status = cmd_play(build_parser().parse_args(argv))
+                status = play.run(build_parser().parse_args(argv))
                 time.sleep(AFTER_SHOW)
             finally:
                 if sim is not None:

@@ -1,0 +1,40 @@
+"""``marionette shape SHOW -o SHAPED``: join the points of rest by timed
+parabolic moves, offline (docs/shaping.md)."""
+from __future__ import annotations
+
+from marionette.config import load_config
+from marionette.show import load_show
+
+
+def register(sub) -> None:
+    p = sub.add_parser("shape", help="join the points of rest by timed parabolic moves (offline)")
+    p.add_argument("show", help="taught show file (.csv or .npz)")
+    p.add_argument("-o", "--output", required=True, help="shaped show to write (.csv or .npz)")
+    p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
+    p.add_argument("--policy", choices=("reduce", "borrow", "reject"), default="reduce",
+                   help="infeasible moves: reduce the excursion, borrow time from the "
+                        "preceding rest, or reject (exit 2)")
+    p.add_argument("--prominence", type=float,
+                   help="smallest excursion counted as a point of rest [axis unit] "
+                        "(default: 2 %% of each axis's range)")
+    p.add_argument("--rest-tolerance", type=float,
+                   help="rest band around an extremum [axis unit] (default: 0.5 %% of the range)")
+    p.add_argument("--accel-fraction", type=float, default=1.0,
+                   help="plan the moves to this fraction of each top acceleration (0 < f <= 1)")
+    p.add_argument("--lag-headroom", action="store_true",
+                   help="plan the speed to leave room for the lag feed-forward of lead "
+                        "dead_time_lag (top speed - time_constant * acceleration)")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from marionette.shape import shape_show
+    config = load_config(args.config)
+    show = load_show(args.show, config)
+    shaped, report = shape_show(show, config, policy=args.policy, prominence=args.prominence,
+                                rest_tolerance=args.rest_tolerance,
+                                accel_fraction=args.accel_fraction, lag_headroom=args.lag_headroom)
+    shaped.save(args.output)
+    print(report)
+    print(f"wrote {args.output}")
+    return 0
