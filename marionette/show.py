@@ -14,6 +14,7 @@ import numpy as np
 
 from marionette.config import UNITS, FigureConfig
 from marionette.errors import ArgumentError, ShowError
+from marionette.npzfile import read_npz
 
 CSV_MAGIC = "# marionette show 1"
 ONSET_COLUMN = "onset_db"       # optional CSV column after loudness: the stored onset strength [dB]
@@ -151,24 +152,29 @@ def _read_csv(path: Path) -> Show:
 
 
 def _read_npz(path: Path) -> Show:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = {"positions", "loudness", "axis_names"} - set(z.files)
-            if missing:
-                raise ShowError(f"{path}: missing array(s) {sorted(missing)}")
-            positions = np.array(z["positions"], dtype=np.float64)
-            names = [str(n) for n in z["axis_names"]]
-            units = [str(u) for u in z["units"]] if "units" in z.files else ["m"] * len(names)
-            return Show(axis_names=names, units=units, positions=positions,
-                        loudness=np.array(z["loudness"], dtype=np.float64),
-                        tick_period=float(z["tick_period"]) if "tick_period" in z.files else 0.02,
-                        source=str(z["source"]) if "source" in z.files else "",
-                        music=str(z["music"]) if "music" in z.files else "", path=str(path),
-                        onsets=np.array(z["onsets"], dtype=np.float64) if "onsets" in z.files else None)
-    except (OSError, ValueError) as exc:
-        if isinstance(exc, ShowError):
-            raise
-        raise ShowError(f"{path}: not a readable NPZ show: {exc}") from None
+    z = read_npz(path, ShowError)
+    missing = {"positions", "loudness", "axis_names"} - set(z)
+    if missing:
+        raise ShowError(f"{path}: missing array(s) {sorted(missing)}")
+
+    def numbers(name):
+        try:
+            return np.array(z[name], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ShowError(f"{path}: array {name!r} ({z[name].dtype}) is not numbers") from None
+
+    def text(name, default=""):
+        return str(z[name]) if name in z else default
+
+    names = [str(n) for n in np.atleast_1d(z["axis_names"])]
+    units = [str(u) for u in np.atleast_1d(z["units"])] if "units" in z else ["m"] * len(names)
+    period = numbers("tick_period") if "tick_period" in z else np.float64(0.02)
+    if period.size != 1:
+        raise ShowError(f"{path}: tick_period has {period.size} values, expected one")
+    return Show(axis_names=names, units=units, positions=numbers("positions"),
+                loudness=numbers("loudness"), tick_period=float(period.reshape(())),
+                source=text("source"), music=text("music"), path=str(path),
+                onsets=numbers("onsets") if "onsets" in z else None)
 
 
 def validate(show: Show) -> None:

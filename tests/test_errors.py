@@ -16,7 +16,7 @@ OPTIONAL = {"marionette.music.sound_card", "marionette.bench.console_cost"}
 
 def _modules():
     for info in pkgutil.walk_packages([str(PACKAGE)], prefix="marionette."):
-        if info.name not in OPTIONAL:
+        if info.name not in OPTIONAL and not info.name.endswith("__main__"):
             yield importlib.import_module(info.name)
 
 

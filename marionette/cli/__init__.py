@@ -15,13 +15,33 @@ import sys
 
 from marionette.cli import (bench, calibrate, check, demo, log, play, plot, shape, sim, sync_sim,
                             teach)
+from marionette import __version__
 from marionette.errors import MarionetteError
+
+DESCRIPTION = """Show control for a servo-driven marionette: it plays a taught motion in
+step with music. A C engine runs the 20 ms tick in real time and sends each
+servo its setpoint ahead by the servo's dead time and lag.
+
+Start with 'marionette demo' (the bundled figure and sample dance on simulated
+servo nodes); teach a dance with calibrate and teach, play it with play, check
+a figure and a show with check. 'marionette COMMAND --help' tells more; the
+documentation is in docs/ and README.md."""
 
 COMMANDS = (play, check, shape, calibrate, teach, plot, sim, sync_sim, log, demo, bench)
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse's parser, whose error is one line and a pointer to --help
+    (not the whole usage, which for play is a dozen lines)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="marionette", description=__doc__.split("\n\n")[0])
+    parser = Parser(prog="marionette", description=DESCRIPTION,
+                    formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     for command in COMMANDS:
         command.register(sub)
@@ -35,6 +55,11 @@ def main(argv: list[str] | None = None) -> int:
         return args.run(args)
     except MarionetteError as exc:
         print(f"marionette: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:          # a file named on the command line, opened where it is used
+        if exc.filename is None:
+            raise
+        print(f"marionette: error: {exc.filename}: {exc.strerror}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:      # outside a show (a show's own Ctrl-C: marionette.console)
         print("marionette: interrupted", file=sys.stderr)

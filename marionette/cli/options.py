@@ -1,9 +1,68 @@
-"""Options that more than one command takes."""
+"""Options that more than one command takes, and the argparse types that
+check a value when it is parsed: a number in its range, a file to write.
+A refused value is argparse's error, which names the option and the value
+(exit status 2)."""
 from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
 
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.show import LIMIT_POLICIES, load_show
+
+
+class Number:
+    """argparse type: an int or a float in a range; NaN and infinities are
+    refused. low/high None: unbounded; above: the low end excluded. The
+    range is in `range` (for the help, and for tests that try values outside)."""
+
+    def __init__(self, kind=float, low=None, high=None, *, above: bool = False):
+        self.kind, self.low, self.high, self.above = kind, low, high, above
+        self.__name__ = "whole number" if kind is int else "number"   # argparse's "invalid ..."
+
+    @property
+    def range(self) -> str:
+        if self.low is not None and self.high is not None:
+            return f"{'(' if self.above else '['}{self.low:g}, {self.high:g}]"
+        if self.low is not None:
+            return f"{'>' if self.above else '>='} {self.low:g}"
+        return f"<= {self.high:g}" if self.high is not None else "any"
+
+    def __call__(self, text: str):
+        try:
+            value = self.kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {self.__name__}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{text!r} is not a finite number")
+        if ((self.low is not None and (value <= self.low if self.above else value < self.low))
+                or (self.high is not None and value > self.high)):
+            raise argparse.ArgumentTypeError(f"{text!r} is outside its range {self.range}")
+        return value
+
+
+def output_file(text: str) -> str:
+    """argparse type: a file that can be written (its folder exists and is
+    writable; an existing file or device is writable), so that a run does
+    not end in an error after its work is done."""
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path")
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder, not a file")
+    if path.exists():
+        if not os.access(path, os.W_OK):
+            raise argparse.ArgumentTypeError(f"{text!r}: no permission to write it")
+        return text
+    folder = path.parent
+    if not folder.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r}: the folder {str(folder)!r} does not exist")
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"{text!r}: no permission to write in {str(folder)!r}")
+    return text
 
 
 def figure_args(p) -> None:

@@ -10,32 +10,47 @@ from dataclasses import replace
 
 import numpy as np
 
-from marionette.cli.options import figure_and_show, figure_args
+from marionette.cli.options import Number, figure_and_show, figure_args, output_file
 from marionette.cli.sync_sim import add_start_argument
 from marionette.console import open_view
 from marionette._core import FLAG_END
-from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
+from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, MAX_RATE, Engine
 from marionette.errors import MarionetteError
 from marionette.faults import FaultWatcher, summary as fault_summary
 from marionette.music.report import (LostWatcher, choose_latency, follow_share, lost_events,
                                      never_locked_warning, recording_warnings, share_line,
                                      verdict_line)
 
+TICKS = Number(int, 1)
+RATE = Number(float, 0.0, MAX_RATE)
+PRIORITY = Number(int, 0, 99)
+CPU = Number(int, 0, (os.cpu_count() or 1) - 1)
+
 
 def register(sub) -> None:
-    p = sub.add_parser("play", help="play a show through the engine and print a summary")
+    p = sub.add_parser("play", help="play a show through the engine and print a summary",
+                       description="Play a show through the engine: in step mode (on a virtual "
+                       "clock, as fast as the CPU allows) or in real time; to servo nodes (--link), "
+                       "a file (--output) or nowhere; following live music (--music, "
+                       "--audio-device) or not. Prints a summary; a flight record with --record.")
     figure_args(p)
     p.add_argument("--realtime", action="store_true", help="run the real-time loop (default: step mode)")
     p.add_argument("--headless", action="store_true",
                    help="no live console: in real time one status line per second on stderr "
                         "(also whenever stdout is not a terminal; docs/console.md)")
     p.add_argument("--json", action="store_true", help="the status lines as JSON lines (headless)")
-    p.add_argument("--ticks", type=int, help="ticks to run (default: the whole show)")
-    p.add_argument("--rate", type=float, default=1.0, help="playback rate [show ticks per tick]")
-    p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag")
-    p.add_argument("--interpolation", choices=sorted(INTERPOLATIONS), default="cubic")
-    p.add_argument("--priority", type=int, default=80, help="SCHED_FIFO priority (0: normal)")
-    p.add_argument("--cpu", type=int, help="pin the real-time thread to this CPU")
+    p.add_argument("--ticks", type=TICKS, help=f"ticks to run, {TICKS.range} (default: the whole show)")
+    p.add_argument("--rate", type=RATE, default=1.0,
+                   help=f"playback rate [show ticks per tick], {RATE.range} (default 1: as taught)")
+    p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag",
+                   help="how far ahead each servo is sent its setpoint: dead_time_lag (default): "
+                        "x(t + Td) + tau x'(t + Td), which cancels the dead time and the lag; "
+                        "mean_delay: x(t + Td + tau), the paper's; none: x(t)")
+    p.add_argument("--interpolation", choices=sorted(INTERPOLATIONS), default="cubic",
+                   help="between the show's ticks: cubic (Catmull-Rom, default) or linear")
+    p.add_argument("--priority", type=PRIORITY, default=80,
+                   help=f"SCHED_FIFO priority {PRIORITY.range} (0: normal; default 80)")
+    p.add_argument("--cpu", type=CPU, help=f"pin the real-time thread to this CPU, {CPU.range}")
     p.add_argument("--lock-memory", action=argparse.BooleanOptionalAction, default=True,
                    help="mlockall before starting the real-time loop (default; a warning, "
                         "not a failure, when not permitted)")
@@ -43,8 +58,9 @@ def register(sub) -> None:
                    help="at the end of a real-time show on a --link: come to rest and hold "
                         "(default), or a limited move home; then the nodes are told, so no "
                         "watchdog trips ('none': stop sending, the watchdogs stop the figure)")
-    p.add_argument("--record", help="write the flight record to this file")
-    p.add_argument("--output", help="write the setpoint frames to this file or device")
+    p.add_argument("--record", type=output_file, help="write the flight record to this file")
+    p.add_argument("--output", type=output_file,
+                   help="write the setpoint frames to this file or device")
     p.add_argument("--link", help="send to servo nodes: serial:URL[@BAUD] or "
                                   "can:INTERFACE:CHANNEL[@BITRATE] (see 'marionette sim')")
     p.add_argument("--follow", choices=("smooth", "paper"),
@@ -111,7 +127,10 @@ def run(args) -> int:
         for line in recording_warnings(args.music, live.loudness, period, show.duration, args.start):
             print(line, file=sys.stderr, flush=True)
     if args.output:
-        output = os.open(args.output, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
+        try:
+            output = os.open(args.output, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
+        except OSError as exc:
+            raise MarionetteError(f"--output {args.output}: cannot open it: {exc.strerror}") from None
     elif args.link:
         from marionette.transport import open_link
         output = open_link(args.link)

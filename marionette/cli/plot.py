@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from marionette.errors import ShowError, TeachError
+from marionette.npzfile import read_npz
 from marionette.show import load_show
 
 COLOURS = ("tab:red", "tab:orange", "tab:olive", "tab:green", "tab:cyan", "tab:blue", "tab:purple")
@@ -20,24 +21,19 @@ COLOURS = ("tab:red", "tab:orange", "tab:olive", "tab:green", "tab:cyan", "tab:b
 
 def read_stages(path: Path) -> dict:
     """Stage arrays of a taught .npz: names, labels, times and (axes, samples) values."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if "stage_names" not in z.files:
-                raise TeachError(f"{path}: no filter stages in this show (only shows written by "
-                                 "`marionette teach` have them)")
-            names = [str(n) for n in z["stage_names"]]
-            out = {"names": names, "labels": [str(s) for s in z["stage_labels"]],
-                   "bases": [str(s) for s in z["stage_bases"]],
-                   "set": np.array(z["stage_set_times"]), "tick": np.array(z["stage_tick_times"])}
-            missing = [f"stage_{n}" for n in names if f"stage_{n}" not in z.files]
-            if missing:
-                raise TeachError(f"{path}: stage array {missing[0]!r} is missing")
-            out["values"] = {n: np.array(z[f"stage_{n}"]) for n in names}
-    except (OSError, ValueError) as exc:
-        if isinstance(exc, TeachError):
-            raise
-        raise TeachError(f"{path}: not a readable .npz show: {exc}") from None
-    return out
+    z = read_npz(path, TeachError)
+    if "stage_names" not in z:
+        raise TeachError(f"{path}: no filter stages in this show (only shows written by "
+                         "`marionette teach` have them)")
+    names = [str(n) for n in z["stage_names"]]
+    wanted = ["stage_labels", "stage_bases", "stage_set_times", "stage_tick_times"]
+    missing = [k for k in wanted + [f"stage_{n}" for n in names] if k not in z]
+    if missing:
+        raise TeachError(f"{path}: stage array {missing[0]!r} is missing")
+    return {"names": names, "labels": [str(s) for s in z["stage_labels"]],
+            "bases": [str(s) for s in z["stage_bases"]],
+            "set": z["stage_set_times"], "tick": z["stage_tick_times"],
+            "values": {n: z[f"stage_{n}"] for n in names}}
 
 
 def run(args) -> int:
