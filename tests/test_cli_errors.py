@@ -81,3 +81,36 @@ def test_help_and_version(capsys):
     status, out, _ = cli(capsys, "play", "--help")
     for said in ("[0, 10]", "dead_time_lag (default)", "Catmull-Rom", "Play a show"):
         assert said in " ".join(out.split()), said
+
+
+def test_plot_refuses_an_unknown_image_format_or_a_missing_folder(show_npz, tmp_path, capsys):
+    refused(capsys, "plot", show_npz, "--axis", "x", "-o", tmp_path / "p.xyz",
+            names=["-o/--output", "p.xyz", "'.xyz'", ".png"])
+    missing = tmp_path / "none" / "p.png"
+    refused(capsys, "plot", show_npz, "--axis", "x", "-o", missing,
+            names=["-o/--output", str(missing), "does not exist"])
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["--drop", "2"], ["--drop", "'2'", "[0, 1]"]),
+    (["--corrupt", "-0.1"], ["--corrupt", "'-0.1'"]),
+    (["--silent", "9"], ["--silent 9", "no node 9", "1, 2, 3, 4, 5"]),
+    (["--silent", "1", "x"], ["--silent", "'x'"]),
+    (["--loudness-node", "7"], ["--loudness-node 7", "no node 7"]),
+    (["--watchdog-ticks", "0"], ["--watchdog-ticks", "'0'"])])
+def test_sim_refuses_bad_faults_before_it_starts(argv, said, capsys):
+    refused(capsys, "sim", "--seconds", "0.1", *argv, names=said)
+
+
+def test_sim_control_lines_are_checked():
+    from marionette.sim.faults import Faults
+    from marionette.errors import MarionetteError
+    faults = Faults(nodes=frozenset({1, 2, 5}))
+    for line, said in [("silence 99", "no node 99"), ("silence x", "'x' is not a whole number"),
+                       ("corrupt abc", "'abc' is not a number"), ("drop 2", "at most 1"),
+                       ("delay -1", ">= 0"), ("wobble 1", "unknown fault"), ("silence", "expected")]:
+        with pytest.raises(MarionetteError) as info:
+            faults.apply(line)
+        assert repr(line) in str(info.value) and said in str(info.value), line
+    assert faults.apply("silence 5") == "node 5 silenced" and faults.silent == {5}
+    assert faults.apply("corrupt 0.25") == "corrupt_rate = 0.25"

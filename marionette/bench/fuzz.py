@@ -41,7 +41,7 @@ import sys
 import tempfile
 
 from marionette.bench._machine import describe, machine_info
-from marionette.errors import MarionetteError
+from marionette.cli.options import Number
 
 DEFAULT_FRAMES = 1_000_000
 SEED = 20261122
@@ -173,16 +173,14 @@ def register(sub) -> None:
         "fuzz", help="random and mutated frames through the protocol decoder",
         description="Random and mutated frames through the C protocol decoder and deframer: "
                     "no crash, no hang, frames/s, corrupt frames accepted against the CRC's odds.")
-    parser.add_argument("--frames", type=int, default=DEFAULT_FRAMES,
+    parser.add_argument("--frames", type=Number(int, 1), default=DEFAULT_FRAMES,
                         help=f"serial frames (default {DEFAULT_FRAMES}; CAN frames: about a quarter more)")
-    parser.add_argument("--seed", type=int, default=SEED, help="seed of the fuzzer")
+    parser.add_argument("--seed", type=Number(int, 0, 2**64 - 1), default=SEED, help="seed of the fuzzer")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
 
 
 def run(args) -> int:
-    if args.frames < 1 or not 0 <= args.seed < 2**64:
-        raise MarionetteError("--frames must be >= 1 and --seed 0 .. 2^64-1")
     if args.worker:
         _worker(args.seed, args.frames)
         return 0

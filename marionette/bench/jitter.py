@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import shutil
 import subprocess
@@ -48,11 +49,12 @@ import warnings
 import numpy as np
 
 from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import Number
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
-from marionette.show import load_show
 from marionette.errors import ArgumentError, MarionetteError
+from marionette.show import load_show
 
 PRIORITY = 80             # SCHED_FIFO priority of the tick thread and of cyclictest [1..99]
 SECONDS = 20.0            # length of each kind of run, all rounds together [s]
@@ -301,28 +303,24 @@ def register(sub) -> None:
         "jitter", help="wake latency of the real-time loop, beside cyclictest",
         description="Wake latency [us] of the real-time loop, beside cyclictest at the same "
                     "period and priority, and under Python threads loading the GIL.")
-    parser.add_argument("--seconds", type=float, default=SECONDS, metavar="N",
+    parser.add_argument("--seconds", type=Number(float, 0.0, above=True), default=SECONDS, metavar="N",
                         help=f"length of each of the three runs [s] (default {SECONDS:g})")
-    parser.add_argument("--priority", type=int, default=PRIORITY, metavar="P",
+    parser.add_argument("--priority", type=Number(int, 1, 99), default=PRIORITY, metavar="P",
                         help=f"SCHED_FIFO priority 1..99 (default {PRIORITY})")
     parser.add_argument("--no-mlock", action="store_true",
                         help="do not lock memory (engine lock_memory, cyclictest -m)")
-    parser.add_argument("--cpu", type=int, default=None, metavar="N",
+    parser.add_argument("--cpu", type=Number(int, 0, (os.cpu_count() or 1) - 1), default=None, metavar="N",
                         help="pin the tick thread and cyclictest to CPU N (default: not pinned)")
     parser.add_argument("--cyclictest", default="cyclictest", metavar="PATH",
                         help="cyclictest executable (default: found on PATH)")
     parser.add_argument("--no-cyclictest", action="store_true", help="skip the cyclictest run")
-    parser.add_argument("--rounds", type=int, default=ROUNDS, metavar="R",
+    parser.add_argument("--rounds", type=Number(int, 1), default=ROUNDS, metavar="R",
                         help=f"interleave the runs in R rounds (default {ROUNDS})")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
 
 
 def run(args) -> int:
-    if not args.seconds > 0:
-        raise MarionetteError("--seconds must be > 0")
-    if not 1 <= args.priority <= 99:
-        raise MarionetteError("--priority must be 1..99")
     result = collect(args.seconds, args.priority, not args.no_mlock,
                  None if args.no_cyclictest else args.cyclictest, cpu=args.cpu,
                  rounds=max(1, args.rounds))

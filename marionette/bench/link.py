@@ -34,11 +34,12 @@ import numpy as np
 
 from marionette import protocol
 from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import Number
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
-from marionette.show import load_show
 from marionette.errors import ArgumentError, MarionetteError
+from marionette.show import load_show
 
 PRIORITY = 40           # SCHED_FIFO of the engine, when permitted
 SIM_PRIORITY = 30       # and of the simulator
@@ -142,7 +143,7 @@ def register(sub) -> None:
     parser = sub.add_parser(
         "link", help="latency from the tick to a decoded frame in the simulator; codec rates",
         description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=float, default=5.0, help="real-time run per link [s]")
+    parser.add_argument("--seconds", type=Number(float, 0.0, above=True), default=5.0, help="real-time run per link [s]")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from marionette._core import plan_move
 from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import SEED as SEED_OPTION, Number
 from marionette.errors import ArgumentError, MarionetteError
 
 CASES = 10_000
@@ -112,8 +113,8 @@ def register(sub) -> None:
     parser = sub.add_parser(
         "moves", help="online moves against Ruckig, limit violations, climax timing",
         description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cases", type=int, default=CASES, help="random move cases")
-    parser.add_argument("--seed", type=int, default=SEED)
+    parser.add_argument("--cases", type=Number(int, 1), default=CASES, help="random move cases")
+    parser.add_argument("--seed", type=SEED_OPTION, default=SEED, help="seed of the random cases")
     parser.add_argument("--quick", action="store_true", help="small counts, for tests")
     parser.add_argument("--json", action="store_true")
     parser.add_argument("--strict", action="store_true", help="exit 1 when a target fails")

@@ -26,8 +26,8 @@ from __future__ import annotations
 import numpy as np
 
 from marionette.config import FigureConfig
-from marionette.show import Show, fit_to_figure
 from marionette.errors import ArgumentError
+from marionette.show import Show, fit_to_figure
 
 LEADS = ("dead_time_lag", "mean_delay", "none")
 INTERPOLATIONS = ("cubic", "linear")

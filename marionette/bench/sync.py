@@ -87,11 +87,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import SEED as SEED_OPTION, Number
 from marionette.music.feature import FRAME_PERIOD, loudness, onsets
 from marionette.music.follower import STATES, Follower, sync_ticks
 from marionette.sim.music import synthesize
 from marionette.sim.tape import Deck, play
-from marionette.errors import MarionetteError
 
 T = FRAME_PERIOD                # tick period [s]
 SEED = 20261122
@@ -554,23 +554,19 @@ def register(sub) -> None:
                         help="print a JSON list (one object per mode, then one per set of the cue's runs)")
     parser.add_argument("--strict", action="store_true",
                         help="exit with status 1 if a target fails (smooth mode, the cue's included)")
-    parser.add_argument("--seconds", type=float, default=None, metavar="S",
+    parser.add_argument("--seconds", type=Number(float, 10.0), default=None, metavar="S",
                         help="cap each live recording at S seconds (default: to the piece's end)")
     parser.add_argument("--quick", action="store_true",
                         help="one short piece, two scenarios, their top variants and one wrong-cue "
                              "deck (smoke test; figures meaningless)")
-    parser.add_argument("--seed", type=int, default=SEED, help="seed of the first set of scenarios")
-    parser.add_argument("--seeds", type=int, default=SEEDS, metavar="N",
+    parser.add_argument("--seed", type=SEED_OPTION, default=SEED, help="seed of the first set of scenarios")
+    parser.add_argument("--seeds", type=Number(int, 1), default=SEEDS, metavar="N",
                         help=f"sets of scenarios, seeds SEED to SEED + N - 1 (default {SEEDS}): "
                              "tuning to one set does not pass")
 
 
 def run(args) -> int:
-    if args.seconds is not None and not args.seconds >= 10.0:
-        raise MarionetteError("--seconds must be at least 10")
     progress = None if args.json else (lambda msg: print(f"  {msg}", file=sys.stderr, flush=True))
-    if args.seeds < 1:
-        raise MarionetteError("--seeds must be at least 1")
     results = collect(args.seconds, args.quick, args.seed, progress, 1 if args.quick else args.seeds)
     if args.json:
         json.dump(results, sys.stdout, indent=2, default=float)

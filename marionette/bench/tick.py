@@ -34,10 +34,10 @@ import numpy as np
 
 from marionette.bench._machine import describe, machine_info
 from marionette.bench.reference import ReferenceEngine
+from marionette.cli.options import SEED as SEED_OPTION, Number
 from marionette.config import FigureConfig, config_from_dict
 from marionette.engine import Engine
 from marionette.show import Show
-from marionette.errors import MarionetteError
 
 SIZES = (16, 256, 4096)                                 # axes
 DEFAULT_TICKS = {16: 20000, 256: 20000, 4096: 5000}     # ticks per size
@@ -218,17 +218,15 @@ def register(sub) -> None:
                         help="print a JSON list of rows instead of the table")
     parser.add_argument("--quick", action="store_true",
                         help="tiny tick counts and a short show (smoke test; numbers meaningless)")
-    parser.add_argument("--axes", type=int, nargs="+", default=list(SIZES), metavar="N",
+    parser.add_argument("--axes", type=Number(int, 1, 65536), nargs="+", default=list(SIZES), metavar="N",
                         help="axis counts to run (default: 16 256 4096)")
-    parser.add_argument("--ticks", type=int, default=None, metavar="N",
+    parser.add_argument("--ticks", type=Number(int, 1), default=None, metavar="N",
                         help="ticks per axis count (default: 20000 for 16 and 256 axes, 5000 for 4096)")
-    parser.add_argument("--seed", type=int, default=SEED, help="seed of the synthetic figure and show")
+    parser.add_argument("--seed", type=SEED_OPTION, default=SEED, help="seed of the synthetic figure and show")
     parser.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
 
 
 def run(args) -> int:
-    if any(n < 1 for n in args.axes) or (args.ticks is not None and args.ticks < 1):
-        raise MarionetteError("axis counts and ticks must be >= 1")
     rows = collect(args.axes, args.ticks, args.quick, args.seed)
     if args.json:
         json.dump(rows, sys.stdout, indent=2)

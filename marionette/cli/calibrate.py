@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from marionette.cli.options import Number, output_file
 from marionette.errors import TeachError
 from marionette.teach.calibration import MIN_MARKERS, calibrate
 from marionette.teach.camera import IDEAL_PARAMETER_NAMES, PARAMETER_NAMES, UNITS
@@ -82,8 +83,6 @@ def run(args) -> int:
         if len(cm.names) < MIN_MARKERS:
             raise TeachError(f"{path}: camera {k}: calibration needs at least {MIN_MARKERS} "
                              f"markers, the file has {len(cm.names)} ({', '.join(cm.names)})")
-    if args.max_iter is not None and args.max_iter < 1:
-        raise TeachError(f"--max-iter {args.max_iter}: must be at least 1")
     size = image_size(args.image_size)
     guesses, guess_kind = _guesses(args, markers, size)
     method = SOLVERS[args.solver]
@@ -139,7 +138,8 @@ def register(subparsers) -> None:
                               description="Identify the cameras from known markers and write "
                               "cameras.toml for `marionette teach` (docs/teach.md).")
     p.add_argument("markers", nargs="?", help="marker file (CSV: camera,marker,x,y,z,R,T)")
-    p.add_argument("-o", "--output", required=True, help="cameras file to write (TOML)")
+    p.add_argument("-o", "--output", required=True, type=output_file,
+                   help="cameras file to write (TOML)")
     p.add_argument("--sample", action="store_true", help="use the bundled sample's markers")
     p.add_argument("--solver", choices=sorted(SOLVERS), default="lm",
                    help="lm: Levenberg-Marquardt (default, fast); steepest-descent: the paper's "
@@ -153,6 +153,6 @@ def register(subparsers) -> None:
                    help="sensor COLUMNSxROWS [pixel]; the optical axis is its centre (default 512x512)")
     p.add_argument("--guess", help="starting cameras (cameras.toml format; angles or target = "
                                    "[x, y, z]); default: found linearly from the markers")
-    p.add_argument("--max-iter", type=int, help="iteration limit (default 200 for lm, 20000 for "
+    p.add_argument("--max-iter", type=Number(int, 1), help="iteration limit (default 200 for lm, 20000 for "
                                                 "steepest-descent)")
     p.set_defaults(run=run)

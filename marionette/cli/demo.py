@@ -26,6 +26,7 @@ import threading
 import time
 from pathlib import Path
 
+from marionette.cli.options import Number
 from marionette.errors import MarionetteError
 
 DEFAULT_DURATION = 20.0  # [s] of show: the intro, a verse and into the chorus; CI runs it
@@ -40,7 +41,7 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="teach the bundled sample, play it on simulated servo nodes "
                                     "with its music under the live console, print the summaries",
                        description=__doc__.split("\n\n")[1].replace("\n", " "))
-    p.add_argument("--duration", type=float, default=DEFAULT_DURATION,
+    p.add_argument("--duration", type=Number(float, 0.0, above=True), default=DEFAULT_DURATION,
                    help=f"seconds of show to play (default {DEFAULT_DURATION:g}; the sample's "
                         "whole song: 45)")
     p.add_argument("--headless", action="store_true",
@@ -187,8 +188,6 @@ def _demo(args) -> int:
     from marionette.cli import build_parser, play
     from marionette.config import load_config
     from marionette.teach.make_sample import sample_path
-    if not args.duration > 0:
-        raise MarionetteError(f"--duration {args.duration!r}: must be > 0 [s]")
     period = load_config(None).tick_period                            # [s]
     ticks = max(1, round(args.duration / period))
     with tempfile.TemporaryDirectory(prefix="marionette-demo-") as tmp:

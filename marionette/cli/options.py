@@ -44,6 +44,11 @@ class Number:
         return value
 
 
+ACCEL_FRACTION = Number(float, 0.0, 1.0, above=True)   # of each top acceleration (shape, teach)
+PRIORITY = Number(int, 0, 99)                          # SCHED_FIFO; 0: normal
+SEED = Number(int, 0, 2**63 - 1)
+
+
 def output_file(text: str) -> str:
     """argparse type: a file that can be written (its folder exists and is
     writable; an existing file or device is writable), so that a run does
@@ -62,6 +67,22 @@ def output_file(text: str) -> str:
         raise argparse.ArgumentTypeError(f"{text!r}: the folder {str(folder)!r} does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
         raise argparse.ArgumentTypeError(f"{text!r}: no permission to write in {str(folder)!r}")
+    return text
+
+
+def image_file(text: str) -> str:
+    """argparse type: an output_file whose suffix is an image format that
+    matplotlib writes (.png, .pdf, .svg, ...)."""
+    output_file(text)
+    try:
+        from matplotlib.backend_bases import FigureCanvasBase
+    except ImportError:                 # said by the command that needs it
+        return text
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if Path(text).suffix.lower().lstrip(".") not in formats:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: unknown image format {Path(text).suffix or '(no suffix)'!r} "
+            f"(use one of {', '.join('.' + f for f in sorted(formats))})")
     return text
 
 

@@ -10,10 +10,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from marionette.cli.options import Number, figure_and_show, figure_args, output_file
+from marionette._core import FLAG_END
+from marionette.cli.options import PRIORITY, Number, figure_and_show, figure_args, output_file
 from marionette.cli.sync_sim import add_start_argument
 from marionette.console import open_view
-from marionette._core import FLAG_END
 from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, MAX_RATE, Engine
 from marionette.errors import MarionetteError
 from marionette.faults import FaultWatcher, summary as fault_summary
@@ -23,7 +23,6 @@ from marionette.music.report import (LostWatcher, choose_latency, follow_share, 
 
 TICKS = Number(int, 1)
 RATE = Number(float, 0.0, MAX_RATE)
-PRIORITY = Number(int, 0, 99)
 CPU = Number(int, 0, (os.cpu_count() or 1) - 1)
 
 

@@ -12,10 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
+from marionette.cli.options import Number, image_file
 from marionette.errors import ShowError, TeachError
 from marionette.npzfile import read_npz
 from marionette.show import load_show
 
+DPI = Number(int, 10, 1200)        # [dots per inch]
 COLOURS = ("tab:red", "tab:orange", "tab:olive", "tab:green", "tab:cyan", "tab:blue", "tab:purple")
 
 
@@ -91,6 +93,8 @@ def register(subparsers) -> None:
                               "`marionette teach`, one above the other (docs/teach.md).")
     p.add_argument("show", help="show written by `marionette teach` (.npz)")
     p.add_argument("--axis", required=True, help="axis name, as in the figure")
-    p.add_argument("-o", "--output", required=True, help="image to write (.png, .pdf, .svg)")
-    p.add_argument("--dpi", type=int, default=100, help="resolution of raster images (default 100)")
+    p.add_argument("-o", "--output", required=True, type=image_file,
+                   help="image to write (.png, .pdf, .svg, ...)")
+    p.add_argument("--dpi", type=DPI, default=100,
+                   help=f"resolution of raster images, {DPI.range} (default 100)")
     p.set_defaults(run=run)

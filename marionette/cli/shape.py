@@ -2,6 +2,7 @@
 parabolic moves, offline (docs/shaping.md)."""
 from __future__ import annotations
 
+from marionette.cli.options import ACCEL_FRACTION, Number, output_file
 from marionette.config import load_config
 from marionette.show import load_show
 
@@ -9,18 +10,19 @@ from marionette.show import load_show
 def register(sub) -> None:
     p = sub.add_parser("shape", help="join the points of rest by timed parabolic moves (offline)")
     p.add_argument("show", help="taught show file (.csv or .npz)")
-    p.add_argument("-o", "--output", required=True, help="shaped show to write (.csv or .npz)")
+    p.add_argument("-o", "--output", required=True, type=output_file,
+                   help="shaped show to write (.csv or .npz)")
     p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
     p.add_argument("--policy", choices=("reduce", "borrow", "reject"), default="reduce",
                    help="infeasible moves: reduce the excursion, borrow time from the "
                         "preceding rest, or reject (exit 2)")
-    p.add_argument("--prominence", type=float,
+    p.add_argument("--prominence", type=Number(float, 0.0, above=True),
                    help="smallest excursion counted as a point of rest [axis unit] "
                         "(default: 2 %% of each axis's range)")
-    p.add_argument("--rest-tolerance", type=float,
+    p.add_argument("--rest-tolerance", type=Number(float, 0.0),
                    help="rest band around an extremum [axis unit] (default: 0.5 %% of the range)")
-    p.add_argument("--accel-fraction", type=float, default=1.0,
-                   help="plan the moves to this fraction of each top acceleration (0 < f <= 1)")
+    p.add_argument("--accel-fraction", type=ACCEL_FRACTION, default=1.0,
+                   help=f"plan the moves to this fraction of each top acceleration, {ACCEL_FRACTION.range}")
     p.add_argument("--lag-headroom", action="store_true",
                    help="plan the speed to leave room for the lag feed-forward of lead "
                         "dead_time_lag (top speed - time_constant * acceleration)")
