@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +22,7 @@ from marionette.cli.options import ACCEL_FRACTION, Number, output_file
 from marionette.config import load_config
 from marionette.errors import ArgumentError, TeachError
 from marionette.music.feature import wav_frames
+from marionette.music.report import TAUGHT_SHORT_SHARE, recording_warnings
 from marionette.progress import Progress
 from marionette.shape import POLICIES, shape_show
 from marionette.show import LIMIT_POLICIES, Show, fit_to_figure
@@ -153,6 +155,9 @@ def _teach(args, progress: Progress) -> int:
     show.loudness = np.concatenate([loud[:n], np.zeros(max(0, n - loud.size))])
     show.onsets = np.concatenate([onset[:n], np.zeros(max(0, n - onset.size))])
 
+    warnings = recording_warnings(args.music, loud, config.tick_period, show.duration, 0.0,
+                                  kind="taught music", short_share=TAUGHT_SHORT_SHARE)
+
     progress.step("writing")
     extra = {"stage_names": np.array([k for k, _, _ in STAGES]),
              "stage_bases": np.array([b for _, b, _ in STAGES]),
@@ -164,6 +169,8 @@ def _teach(args, progress: Progress) -> int:
     progress.done()
 
     _report(args, config, settings, stages, show, report, untaught, music_frames)
+    for line in warnings:           # after the report, where they are seen
+        print(line, file=sys.stderr)
     return 0
 
 
