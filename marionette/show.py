@@ -17,6 +17,7 @@ from marionette.errors import ArgumentError, ShowError
 from marionette.npzfile import read_npz
 
 CSV_MAGIC = "# marionette show 1"
+MIN_COMPRESS_GAIN = 0.5         # on_limits="compress" below this gain flattens the dance: refused [1]
 ONSET_COLUMN = "onset_db"       # optional CSV column after loudness: the stored onset strength [dB]
 LIMIT_POLICIES = ("error", "clamp", "compress")
 
@@ -187,7 +188,9 @@ def validate(show: Show) -> None:
         raise ShowError(f"{show.path}: loudness has shape {show.loudness.shape}, "
                         f"expected ({p.shape[1]},)")
     if len(show.units) != len(show.axis_names):
-        raise ShowError(f"{show.path}: {len(show.units)} units for {len(show.axis_names)} axes")
+        raise ShowError(f"{show.path}: {len(show.units)} units ({', '.join(show.units)}) for "
+                        f"{len(show.axis_names)} axes ({', '.join(show.axis_names)}): a column "
+                        "missing, or a unit too many?")
     for name, unit in zip(show.axis_names, show.units):
         if unit not in UNITS:
             raise ShowError(f"{show.path}: axis {name!r} has unknown unit {unit!r} (use one of {UNITS})")
@@ -212,6 +215,19 @@ def validate(show: Show) -> None:
                             "must be finite and >= 0")
 
 
+def check_axes(show: Show, config: FigureConfig) -> None:
+    """The show has a trajectory for every axis of the figure, and no other."""
+    figure_names = config.axis_names
+    unknown = [n for n in show.axis_names if n not in figure_names]
+    if unknown:
+        raise ShowError(f"{show.path}: unknown axis {unknown[0]!r} (not in {config.source}; "
+                        f"known: {', '.join(figure_names)})")
+    missing = [n for n in figure_names if n not in show.axis_names]
+    if missing:
+        raise ShowError(f"{show.path}: no trajectory (column) for axis {missing[0]!r} of "
+                        f"{config.source}")
+
+
 def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") -> Show:
     """The show with its axes in the figure's order, checked against the figure.
 
@@ -225,16 +241,9 @@ def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") ->
     if not math.isclose(show.tick_period, config.tick_period, rel_tol=1e-9):
         raise ShowError(f"{show.path}: tick_period {show.tick_period!r} s does not match "
                         f"{config.source}: {config.tick_period!r} s")
+    check_axes(show, config)
     figure_names = config.axis_names
     row_of = {name: j for j, name in enumerate(show.axis_names)}
-    known = set(figure_names)
-    unknown = [n for n in show.axis_names if n not in known]
-    if unknown:
-        raise ShowError(f"{show.path}: unknown axis {unknown[0]!r} (not in {config.source}; "
-                        f"known: {', '.join(figure_names)})")
-    missing = [n for n in figure_names if n not in row_of]
-    if missing:
-        raise ShowError(f"{show.path}: no trajectory for axis {missing[0]!r} of {config.source}")
     order = [row_of[n] for n in figure_names]
     positions = show.positions[order].copy()
     changes = list(show.changes)
@@ -260,6 +269,13 @@ def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") ->
         else:
             lo, hi = min(float(x.min()), axis.min), max(float(x.max()), axis.max)
             gain = (axis.max - axis.min) / (hi - lo)
+            if gain < MIN_COMPRESS_GAIN:
+                k = int(np.argmax(np.maximum(x - axis.max, axis.min - x)))      # farthest out
+                raise ShowError(f"{show.locate(k)}: axis {axis.name!r} position {float(x[k])!r} "
+                                f"{axis.unit} would compress the axis's range [{lo:.6g}, {hi:.6g}] "
+                                f"into [{axis.min!r}, {axis.max!r}] by a gain of {gain:.3g}, under "
+                                f"{MIN_COMPRESS_GAIN:g}: the dance would be flattened (an outlier? "
+                                "on_limits='clamp' cuts it instead)")
             positions[j] = np.clip(axis.min + (x - lo) * gain, axis.min, axis.max)
             changes.append(f"axis {axis.name!r}: compressed range [{lo:.6g}, {hi:.6g}] into "
                            f"[{axis.min!r}, {axis.max!r}] {axis.unit} (gain {gain:.6g})")
@@ -279,5 +295,7 @@ def load_show(path: str | Path, config: FigureConfig | None = None,
         show = _read_npz(path)
     else:
         raise ShowError(f"{path}: unknown show format {path.suffix!r} (use .csv or .npz)")
+    if config is not None:          # a missing column named before the counts disagree
+        check_axes(show, config)
     validate(show)
     return fit_to_figure(show, config, on_limits) if config is not None else show

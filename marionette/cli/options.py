@@ -11,7 +11,7 @@ from pathlib import Path
 
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
-from marionette.show import LIMIT_POLICIES, load_show
+from marionette.show import LIMIT_POLICIES, MIN_COMPRESS_GAIN, load_show
 
 
 class Number:
@@ -91,7 +91,9 @@ def figure_args(p) -> None:
     p.add_argument("show", nargs="?", help="show file (.csv or .npz); default: the bundled demo")
     p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
     p.add_argument("--on-limits", choices=LIMIT_POLICIES, default="error",
-                   help="what to do with taught positions outside an axis's limits")
+                   help="taught positions outside an axis's limits: error (default), clamp "
+                        "(cut to the limit) or compress (scale the axis into its limits; refused "
+                        f"under a gain of {MIN_COMPRESS_GAIN:g})")
 
 
 def figure_and_show(args):
