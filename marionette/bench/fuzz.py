@@ -40,6 +40,7 @@ import subprocess
 import sys
 import tempfile
 
+from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
 from marionette.cli.options import Number
 
@@ -164,7 +165,7 @@ def format_report(r: dict) -> str:
         "checks:",
     ]
     for name, ok in r["checks"].items():
-        lines.append(f"  {name:<45} {'PASS' if ok else 'FAIL'}")
+        lines.append(f"  {name:<45} {verdict(ok)}")
     return "\n".join(lines)
 
 
@@ -177,6 +178,7 @@ def register(sub) -> None:
                         help=f"serial frames (default {DEFAULT_FRAMES}; CAN frames: about a quarter more)")
     parser.add_argument("--seed", type=Number(int, 0, 2**64 - 1), default=SEED, help="seed of the fuzzer")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
 
 
@@ -190,7 +192,7 @@ def run(args) -> int:
         sys.stdout.write("\n")
     else:
         print(format_report(report))
-    return 0 if report["passed"] else 1
+    return exit_status(report["checks"].values(), args.strict)
 
 
 def main(argv=None) -> int:

@@ -48,6 +48,7 @@ import warnings
 
 import numpy as np
 
+from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
 from marionette.cli.options import Number
 from marionette.config import load_config
@@ -293,8 +294,7 @@ def format_table(result: dict) -> str:
                      "an effect of idle states, not of the GIL")
     lines.append("targets:")
     for label, measured, ok in check_targets(result):
-        verdict = "SKIP" if ok is None else "PASS" if ok else "FAIL"
-        lines.append(f"  {label:<40} {measured:<36} {verdict}")
+        lines.append(f"  {label:<40} {measured:<36} {verdict(ok)}")
     return "\n".join(lines)
 
 
@@ -317,7 +317,7 @@ def register(sub) -> None:
     parser.add_argument("--rounds", type=Number(int, 1), default=ROUNDS, metavar="R",
                         help=f"interleave the runs in R rounds (default {ROUNDS})")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
-    parser.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
+    parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
 
 
 def run(args) -> int:
@@ -329,7 +329,7 @@ def run(args) -> int:
         sys.stdout.write("\n")
     else:
         print(format_table(result))
-    return 1 if args.strict and any(ok is False for ok in result["targets"].values()) else 0
+    return exit_status(result["targets"].values(), args.strict)
 
 
 def main(argv=None) -> int:

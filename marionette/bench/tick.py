@@ -32,6 +32,7 @@ import time
 
 import numpy as np
 
+from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
 from marionette.bench.reference import ReferenceEngine
 from marionette.cli.options import SEED as SEED_OPTION, Number
@@ -205,7 +206,7 @@ def format_table(rows: list[dict]) -> str:
                  "numpy, perf_counter_ns per tick; diff: |engine - reference| last commands [unit]")
     lines.append("targets:")
     for label, value, ok in check_targets(rows):
-        lines.append(f"  {label:<34} measured {value:>10.3f}   {'PASS' if ok else 'FAIL'}")
+        lines.append(f"  {label:<34} measured {value:>10.3f}   {verdict(ok)}")
     return "\n".join(lines)
 
 
@@ -223,7 +224,7 @@ def register(sub) -> None:
     parser.add_argument("--ticks", type=Number(int, 1), default=None, metavar="N",
                         help="ticks per axis count (default: 20000 for 16 and 256 axes, 5000 for 4096)")
     parser.add_argument("--seed", type=SEED_OPTION, default=SEED, help="seed of the synthetic figure and show")
-    parser.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
+    parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
 
 
 def run(args) -> int:
@@ -233,8 +234,7 @@ def run(args) -> int:
         sys.stdout.write("\n")
     else:
         print(format_table(rows))
-    failed = any(not ok for row in rows for ok in row.get("targets", {}).values())
-    return 1 if args.strict and failed else 0
+    return exit_status((ok for row in rows for ok in row.get("targets", {}).values()), args.strict)
 
 
 def main(argv=None) -> int:
