@@ -44,9 +44,23 @@ class Number:
         return value
 
 
+CONFIG_HELP = "figure TOML; default: the bundled Hoffmann 1996 figure"
 ACCEL_FRACTION = Number(float, 0.0, 1.0, above=True)   # of each top acceleration (shape, teach)
 PRIORITY = Number(int, 0, 99)                          # SCHED_FIFO; 0: normal
 SEED = Number(int, 0, 2**63 - 1)
+
+
+def input_file(text: str) -> str:
+    """argparse type: a file that exists and can be read (what is in it is
+    the reader's to check, with the line and value at fault)."""
+    path = Path(text)
+    if not path.exists():
+        raise argparse.ArgumentTypeError(f"{text}: no such file")
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: a folder, not a file")
+    if not os.access(path, os.R_OK):
+        raise argparse.ArgumentTypeError(f"{text}: no permission to read it")
+    return text
 
 
 def output_file(text: str) -> str:
@@ -88,8 +102,9 @@ def image_file(text: str) -> str:
 
 def figure_args(p) -> None:
     """SHOW, --config and --on-limits (play, check)."""
-    p.add_argument("show", nargs="?", help="show file (.csv or .npz); default: the bundled demo")
-    p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
+    p.add_argument("show", nargs="?", type=input_file,
+                   help="show file (.csv or .npz); default: the bundled demo")
+    p.add_argument("--config", type=input_file, help=CONFIG_HELP)
     p.add_argument("--on-limits", choices=LIMIT_POLICIES, default="error",
                    help="taught positions outside an axis's limits: error (default), clamp "
                         "(cut to the limit) or compress (scale the axis into its limits; refused "

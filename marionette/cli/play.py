@@ -11,7 +11,8 @@ from dataclasses import replace
 import numpy as np
 
 from marionette._core import FLAG_END
-from marionette.cli.options import PRIORITY, Number, figure_and_show, figure_args, output_file
+from marionette.cli.options import (PRIORITY, Number, figure_and_show, figure_args, input_file,
+                                    output_file)
 from marionette.cli.sync_sim import add_start_argument
 from marionette.console import open_view
 from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, MAX_RATE, Engine
@@ -65,7 +66,7 @@ def register(sub) -> None:
     p.add_argument("--follow", choices=("smooth", "paper"),
                    help="follow the live music (default mode with --music or --audio-device: "
                         "the figure's [follow] table)")
-    p.add_argument("--music", help="the live music from this recording, played back as if live "
+    p.add_argument("--music", type=input_file, help="the live music from this recording, played back as if live "
                                    "(a silent or short one, or one never locked on, is warned about)")
     add_start_argument(p)
     p.add_argument("--audio-device", nargs="?", const="",

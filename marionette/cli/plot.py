@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from marionette.cli.options import Number, image_file
+from marionette.cli.options import Number, image_file, input_file
 from marionette.errors import ShowError, TeachError
 from marionette.npzfile import read_npz
 from marionette.show import load_show
@@ -91,7 +91,7 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("plot", help="plot the filter stages of one axis of a taught show",
                               description="Plot the filter stages of one axis of a show written by "
                               "`marionette teach`, one above the other (docs/teach.md).")
-    p.add_argument("show", help="show written by `marionette teach` (.npz)")
+    p.add_argument("show", type=input_file, help="show written by `marionette teach` (.npz)")
     p.add_argument("--axis", required=True, help="axis name, as in the figure")
     p.add_argument("-o", "--output", required=True, type=image_file,
                    help="image to write (.png, .pdf, .svg, ...)")

@@ -2,17 +2,17 @@
 parabolic moves, offline (docs/shaping.md)."""
 from __future__ import annotations
 
-from marionette.cli.options import ACCEL_FRACTION, Number, output_file
+from marionette.cli.options import ACCEL_FRACTION, CONFIG_HELP, Number, input_file, output_file
 from marionette.config import load_config
 from marionette.show import load_show
 
 
 def register(sub) -> None:
     p = sub.add_parser("shape", help="join the points of rest by timed parabolic moves (offline)")
-    p.add_argument("show", help="taught show file (.csv or .npz)")
+    p.add_argument("show", type=input_file, help="taught show file (.csv or .npz)")
     p.add_argument("-o", "--output", required=True, type=output_file,
                    help="shaped show to write (.csv or .npz)")
-    p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
+    p.add_argument("--config", type=input_file, help=CONFIG_HELP)
     p.add_argument("--policy", choices=("reduce", "borrow", "reject"), default="reduce",
                    help="infeasible moves: reduce the excursion, borrow time from the "
                         "preceding rest, or reject (exit 2)")

@@ -7,7 +7,7 @@ import os
 import stat
 import sys
 
-from marionette.cli.options import PRIORITY, SEED, Number, output_file
+from marionette.cli.options import CONFIG_HELP, PRIORITY, SEED, Number, input_file, output_file
 from marionette.config import load_config
 from marionette.errors import MarionetteError
 
@@ -22,7 +22,7 @@ def register(sub) -> None:
                        "at the end ('quit' on stdin, --seconds, SIGTERM) a JSON summary. Lines on "
                        "stdin change the faults while it runs: 'silence N', 'resume N', "
                        "'drop R', 'corrupt R', 'delay S', 'noise C', 'quit'.")
-    p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
+    p.add_argument("--config", type=input_file, help=CONFIG_HELP)
     where = p.add_mutually_exclusive_group()
     where.add_argument("--serial", action="store_true", help="serial protocol on a pty (default)")
     where.add_argument("--can", choices=("slcan", "udp_multicast"),
@@ -51,7 +51,7 @@ def register(sub) -> None:
                    help="drives that do not clip acceleration (only speed and position limits), "
                         "so that a command stream asking too much shows in the summary's "
                         "peak_accel [unit/s^2, from positions sampled once per tick]")
-    p.add_argument("--music", help="a node measures this recording's loudness, played from the "
+    p.add_argument("--music", type=input_file, help="a node measures this recording's loudness, played from the "
                                    "start of the run, and reports it in LOUDNESS messages")
     p.add_argument("--loudness-node", type=Number(int, 0, 255), help="the node that does (default: the figure's last)")
     p.add_argument("--priority", type=PRIORITY, default=0,

@@ -32,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from marionette.cli.options import output_file
+from marionette.cli.options import input_file, output_file
 from marionette.config import FOLLOW_MODES, load_config
 from marionette.errors import MarionetteError
 from marionette.music.feature import wav_frames, wav_loudness
@@ -197,15 +197,15 @@ def register(sub) -> None:
                        "over a taught recording (or a show's stored loudness) and a live one; "
                        "write the track (where in the taught music the live music is, per tick) "
                        "and, with --truth, print its accuracy (docs/music.md).")
-    p.add_argument("--taught", required=True,
+    p.add_argument("--taught", required=True, type=input_file,
                    help="the music as taught (WAV), or a show (.npz, .csv) whose stored loudness "
                         "the engine would follow")
-    p.add_argument("--live", required=True, help="the music as played at the show (WAV)")
+    p.add_argument("--live", required=True, type=input_file, help="the music as played at the show (WAV)")
     p.add_argument("--out", required=True, type=output_file, help="track to write (CSV, one row per tick)")
     p.add_argument("--mode", choices=FOLLOW_MODES, default="smooth",
                    help="smooth (fractional rate, default) or paper (double or skip a sample)")
-    p.add_argument("--truth", help="CSV tick,position_s: print the accuracy against it")
-    p.add_argument("--config", help="figure TOML for the tick period and [follow] settings")
+    p.add_argument("--truth", type=input_file, help="CSV tick,position_s: print the accuracy against it")
+    p.add_argument("--config", type=input_file, help="figure TOML for the tick period and [follow] settings")
     add_start_argument(p)
     p.add_argument("--loudness-only", action="store_true",
                    help="live frames without onsets, as servo nodes send them (LOUDNESS)")

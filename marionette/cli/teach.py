@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from marionette.cli.options import ACCEL_FRACTION, Number, output_file
+from marionette.cli.options import ACCEL_FRACTION, CONFIG_HELP, Number, input_file, output_file
 from marionette.config import load_config
 from marionette.errors import ArgumentError, TeachError
 from marionette.music.feature import wav_frames
@@ -69,9 +69,6 @@ def _check_inputs(args) -> None:
         raise TeachError("no recording: give RECORDING.csv (or --sample for the bundled one)")
     if not args.music:
         raise TeachError("no music: give --music MUSIC.wav (its loudness is stored in the show)")
-    for what, path in (("recording", args.recording), ("music", args.music)):
-        if not Path(path).exists():
-            raise TeachError(f"{path}: no such file ({what})")
     if Path(args.output).suffix != ".npz":
         raise TeachError(f"{args.output}: teach writes an .npz show (the filter stages for "
                          "`marionette plot` need it); `marionette shape` or Show.save convert")
@@ -234,17 +231,17 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("teach", help="recording of the dancer -> show for the figure (teach-in)",
                               description="Turn a recording of the dancer's LEDs into a show for the "
                               "figure, with the music's loudness (docs/teach.md).")
-    p.add_argument("recording", nargs="?", help="recording of LED detections (CSV: time_s,camera,led,R,T)")
-    p.add_argument("--cameras", required=True, help="cameras file written by `marionette calibrate`")
+    p.add_argument("recording", nargs="?", type=input_file, help="recording of LED detections (CSV: time_s,camera,led,R,T)")
+    p.add_argument("--cameras", required=True, type=input_file, help="cameras file written by `marionette calibrate`")
     music = p.add_mutually_exclusive_group(required=True)
-    music.add_argument("--music", metavar="MUSIC.wav",
+    music.add_argument("--music", metavar="MUSIC.wav", type=input_file,
                        help="the music the dancer danced to (WAV); its loudness goes into the show")
     music.add_argument("--sample", action="store_true",
                        help="use the bundled sample's recording and music (instead of RECORDING "
                             "and --music)")
     p.add_argument("-o", "--output", required=True, type=output_file, help="show to write (.npz)")
-    p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
-    p.add_argument("--settings", help="teach settings TOML (rucksack, filters, areas, axis map); "
+    p.add_argument("--config", type=input_file, help=CONFIG_HELP)
+    p.add_argument("--settings", type=input_file, help="teach settings TOML (rucksack, filters, areas, axis map); "
                                       "default: the bundled one for the bundled figure")
     p.add_argument("--policy", choices=POLICIES, default="reduce",
                    help="pragmatic filter, infeasible moves: reduce the excursion (default), "

@@ -177,11 +177,11 @@ def test_errors_name_file_line_and_value(taught, tmp_path):
     result = teach(bad)
     assert result.returncode == 2 and f"{bad}: no detections" in result.stderr
     result = teach(tmp_path / "none.csv")
-    assert result.returncode == 2 and f"{tmp_path / 'none.csv'}: no such file (recording)" in result.stderr
+    assert result.returncode == 2 and f"argument recording: {tmp_path / 'none.csv'}: no such file" in result.stderr
     result = teach(d / "recording.csv", cameras=tmp_path / "none.toml")
     assert result.returncode == 2 and f"{tmp_path / 'none.toml'}: no such file" in result.stderr
     result = teach(d / "recording.csv", music=tmp_path / "none.wav")
-    assert result.returncode == 2 and f"{tmp_path / 'none.wav'}: no such file (music)" in result.stderr
+    assert result.returncode == 2 and f"argument --music: {tmp_path / 'none.wav'}: no such file" in result.stderr
     cams = tmp_path / "cams.toml"
     cams.write_text(taught.cameras.read_text().replace("L = ", "L = -", 1))
     result = teach(d / "recording.csv", cameras=cams)
