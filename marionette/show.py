@@ -6,6 +6,7 @@ both formats are described in docs/formats.md.
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -15,6 +16,7 @@ import numpy as np
 from marionette.config import UNITS, FigureConfig
 from marionette.errors import ArgumentError, ShowError
 from marionette.npzfile import read_npz
+from marionette.textfile import read_text
 
 CSV_MAGIC = "# marionette show 1"
 MIN_COMPRESS_GAIN = 0.5         # on_limits="compress" below this gain flattens the dance: refused [1]
@@ -100,41 +102,40 @@ def _read_csv(path: Path) -> Show:
     header: list[str] | None = None
     rows: list[list[float]] = []
     first_line = 0
-    with open(path, newline="") as f:
-        for line_no, line in enumerate(f, start=1):
-            text = line.strip()
-            if not text:
-                continue
-            if text.startswith("#"):
-                if line_no == 1 and text != CSV_MAGIC:
-                    raise ShowError(f"{path}, line 1: expected {CSV_MAGIC!r}, found {text!r}")
-                if ":" in text and header is None:
-                    key, _, value = text[1:].partition(":")
-                    meta[key.strip()] = value.strip()
-                continue
-            cells = next(csv.reader([text]))
-            if header is None:
-                if line_no == 1:
-                    raise ShowError(f"{path}, line 1: expected {CSV_MAGIC!r}")
-                header = [c.strip() for c in cells]
-                with_onsets = len(header) > 2 and header[2] == ONSET_COLUMN
-                if header[:2] != ["tick", "loudness"] or len(header) < 3 + with_onsets:
-                    raise ShowError(f"{path}, line {line_no}: header must be "
-                                    f"'tick,loudness,[{ONSET_COLUMN},]<axis>,...', found {text!r}")
-                dup = {h for h in header if header.count(h) > 1}
-                if dup:
-                    raise ShowError(f"{path}, line {line_no}: duplicate column(s) {sorted(dup)}")
-                continue
-            if len(cells) != len(header):
-                raise ShowError(f"{path}, line {line_no}: {len(cells)} values, "
-                                f"the header has {len(header)} columns")
-            tick = cells[0].strip()
-            if tick != str(len(rows)):
-                raise ShowError(f"{path}, line {line_no}: tick {tick!r}, expected {len(rows)} "
-                                "(ticks must count up from 0 without gaps)")
-            if not rows:
-                first_line = line_no
-            rows.append([_parse_float(path, line_no, header[i], c) for i, c in enumerate(cells[1:], 1)])
+    for line_no, line in enumerate(io.StringIO(read_text(path, ShowError), newline=""), start=1):
+        text = line.strip()
+        if not text:
+            continue
+        if text.startswith("#"):
+            if line_no == 1 and text != CSV_MAGIC:
+                raise ShowError(f"{path}, line 1: expected {CSV_MAGIC!r}, found {text!r}")
+            if ":" in text and header is None:
+                key, _, value = text[1:].partition(":")
+                meta[key.strip()] = value.strip()
+            continue
+        cells = next(csv.reader([text]))
+        if header is None:
+            if line_no == 1:
+                raise ShowError(f"{path}, line 1: expected {CSV_MAGIC!r}")
+            header = [c.strip() for c in cells]
+            with_onsets = len(header) > 2 and header[2] == ONSET_COLUMN
+            if header[:2] != ["tick", "loudness"] or len(header) < 3 + with_onsets:
+                raise ShowError(f"{path}, line {line_no}: header must be "
+                                f"'tick,loudness,[{ONSET_COLUMN},]<axis>,...', found {text!r}")
+            dup = {h for h in header if header.count(h) > 1}
+            if dup:
+                raise ShowError(f"{path}, line {line_no}: duplicate column(s) {sorted(dup)}")
+            continue
+        if len(cells) != len(header):
+            raise ShowError(f"{path}, line {line_no}: {len(cells)} values, "
+                            f"the header has {len(header)} columns")
+        tick = cells[0].strip()
+        if tick != str(len(rows)):
+            raise ShowError(f"{path}, line {line_no}: tick {tick!r}, expected {len(rows)} "
+                            "(ticks must count up from 0 without gaps)")
+        if not rows:
+            first_line = line_no
+        rows.append([_parse_float(path, line_no, header[i], c) for i, c in enumerate(cells[1:], 1)])
     if header is None or not rows:
         raise ShowError(f"{path}: no data rows")
     data = np.array(rows, dtype=np.float64)

@@ -306,7 +306,7 @@ def register(sub) -> None:
     parser.add_argument("--seconds", type=Number(float, 0.0, above=True), default=SECONDS, metavar="N",
                         help=f"length of each of the three runs [s] (default {SECONDS:g})")
     parser.add_argument("--priority", type=Number(int, 1, 99), default=PRIORITY, metavar="P",
-                        help=f"SCHED_FIFO priority 1..99 (default {PRIORITY})")
+                        help=f"SCHED_FIFO priority (default {PRIORITY})")
     parser.add_argument("--no-mlock", action="store_true",
                         help="do not lock memory (engine lock_memory, cyclictest -m)")
     parser.add_argument("--cpu", type=Number(int, 0, (os.cpu_count() or 1) - 1), default=None, metavar="N",

@@ -13,9 +13,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from marionette import __version__
 from marionette.cli import (bench, calibrate, check, demo, log, play, plot, shape, sim, sync_sim,
                             teach)
-from marionette import __version__
+from marionette.cli.options import HelpFormatter
 from marionette.errors import MarionetteError
 
 DESCRIPTION = """Show control for a servo-driven marionette: it plays a taught motion in
@@ -30,17 +31,24 @@ documentation is in docs/ and README.md."""
 COMMANDS = (play, check, shape, calibrate, teach, plot, sim, sync_sim, log, demo, bench)
 
 
+class TopHelpFormatter(HelpFormatter, argparse.RawDescriptionHelpFormatter):
+    """The top-level description keeps its paragraphs."""
+
+
 class Parser(argparse.ArgumentParser):
     """argparse's parser, whose error is one line and a pointer to --help
-    (not the whole usage, which for play is a dozen lines)."""
+    (not the whole usage, which for play is a dozen lines), and whose help
+    gives each number's range."""
+
+    def __init__(self, *args, formatter_class=HelpFormatter, **kwargs):
+        super().__init__(*args, formatter_class=formatter_class, **kwargs)
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = Parser(prog="marionette", description=DESCRIPTION,
-                    formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = Parser(prog="marionette", description=DESCRIPTION, formatter_class=TopHelpFormatter)
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     for command in COMMANDS:

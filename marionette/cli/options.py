@@ -25,11 +25,12 @@ class Number:
 
     @property
     def range(self) -> str:
+        low, high = (v if v is None or self.kind is int else f"{v:g}" for v in (self.low, self.high))
         if self.low is not None and self.high is not None:
-            return f"{'(' if self.above else '['}{self.low:g}, {self.high:g}]"
+            return f"{'(' if self.above else '['}{low}, {high}]"
         if self.low is not None:
-            return f"{'>' if self.above else '>='} {self.low:g}"
-        return f"<= {self.high:g}" if self.high is not None else "any"
+            return f"{'>' if self.above else '>='} {low}"
+        return f"<= {high}" if self.high is not None else "any"
 
     def __call__(self, text: str):
         try:
@@ -48,6 +49,16 @@ CONFIG_HELP = "figure TOML; default: the bundled Hoffmann 1996 figure"
 ACCEL_FRACTION = Number(float, 0.0, 1.0, above=True)   # of each top acceleration (shape, teach)
 PRIORITY = Number(int, 0, 99)                          # SCHED_FIFO; 0: normal
 SEED = Number(int, 0, 2**63 - 1)
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """Every numeric option's help says its range (when it does not already)."""
+
+    def _get_help_string(self, action):
+        text = super()._get_help_string(action) or ""
+        if isinstance(action.type, Number) and action.type.range not in text:
+            text = f"{text} (range {action.type.range})".strip()
+        return text
 
 
 def input_file(text: str) -> str:

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import math
 from pathlib import Path
 
@@ -38,6 +39,7 @@ from marionette.errors import MarionetteError
 from marionette.music.feature import wav_frames, wav_loudness
 from marionette.music.follower import DEFAULT_START, STATES, Follower, cue_ticks, sync_ticks
 from marionette.show import load_show
+from marionette.textfile import read_text
 
 
 class SyncSimError(MarionetteError, ValueError):
@@ -48,32 +50,31 @@ def read_truth(path) -> dict[int, float]:
     """tick -> position_s [s] from a CSV with the header tick,position_s."""
     path = Path(path)
     try:
-        f = open(path, newline="")
+        text = read_text(path, SyncSimError)
     except FileNotFoundError:
         raise SyncSimError(f"{path}: no such truth file") from None
     truth: dict[int, float] = {}
-    with f:
-        rows = csv.reader(f)
-        header = next(rows, None)
-        if header is None or [h.strip() for h in header[:2]] != ["tick", "position_s"]:
-            raise SyncSimError(f"{path}:1: expected the header 'tick,position_s', found {header!r}")
-        for line, row in enumerate(rows, start=2):
-            if not row or not "".join(row).strip():
-                continue
-            if len(row) < 2:
-                raise SyncSimError(f"{path}:{line}: expected 'tick,position_s', found {','.join(row)!r}")
-            try:
-                tick = int(row[0])
-            except ValueError:
-                raise SyncSimError(f"{path}:{line}: tick {row[0]!r} is not an integer") from None
-            try:
-                pos = float(row[1])
-            except ValueError:
-                raise SyncSimError(f"{path}:{line}: position_s {row[1]!r} is not a number") from None
-            if tick < 0 or not math.isfinite(pos):
-                raise SyncSimError(f"{path}:{line}: tick {tick} / position_s {pos!r}: the tick must "
-                                   "be >= 0 and the position finite")
-            truth[tick] = pos
+    rows = csv.reader(io.StringIO(text, newline=""))
+    header = next(rows, None)
+    if header is None or [h.strip() for h in header[:2]] != ["tick", "position_s"]:
+        raise SyncSimError(f"{path}:1: expected the header 'tick,position_s', found {header!r}")
+    for line, row in enumerate(rows, start=2):
+        if not row or not "".join(row).strip():
+            continue
+        if len(row) < 2:
+            raise SyncSimError(f"{path}:{line}: expected 'tick,position_s', found {','.join(row)!r}")
+        try:
+            tick = int(row[0])
+        except ValueError:
+            raise SyncSimError(f"{path}:{line}: tick {row[0]!r} is not an integer") from None
+        try:
+            pos = float(row[1])
+        except ValueError:
+            raise SyncSimError(f"{path}:{line}: position_s {row[1]!r} is not a number") from None
+        if tick < 0 or not math.isfinite(pos):
+            raise SyncSimError(f"{path}:{line}: tick {tick} / position_s {pos!r}: the tick must "
+                               "be >= 0 and the position finite")
+        truth[tick] = pos
     if not truth:
         raise SyncSimError(f"{path}: no rows")
     return truth

@@ -45,6 +45,7 @@ from typing import Sequence
 
 from .camera import ALL_NAMES, UNITS, CameraParams, look_at
 from marionette.errors import ArgumentError, MarionetteError
+from marionette.textfile import read_text
 
 INFO_TABLES = ("calibration", "uncertainty")
 
@@ -57,8 +58,7 @@ def read_cameras(path) -> list[CameraParams]:
     """Cameras of a cameras.toml file, in order (see the module docstring)."""
     path = os.fspath(path)
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+        data = tomllib.loads(read_text(path, CameraFileError))
     except FileNotFoundError:
         raise CameraFileError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:

@@ -23,13 +23,15 @@ number (1-based) and the offending value.
 
 from __future__ import annotations
 
+import io
 import math
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
-from marionette.errors import ArgumentError, LineError
+from marionette.errors import ArgumentError, LineError, TeachError
+from marionette.textfile import read_text
 
 HEADER = ("time_s", "camera", "led", "R", "T")
 N_LEDS = 4
@@ -161,8 +163,8 @@ def parse_recording(lines, path="<recording>", n_cameras: int = 2) -> Recording:
 
 def read_recording(path, n_cameras: int = 2) -> Recording:
     """Read a recording CSV file; raises :class:`RecordingError` on malformed content."""
-    with open(path, encoding="utf-8", newline="") as fh:
-        return parse_recording(fh, path=os.fspath(path), n_cameras=n_cameras)
+    text = read_text(path, TeachError)
+    return parse_recording(io.StringIO(text, newline=""), path=os.fspath(path), n_cameras=n_cameras)
 
 
 def _format(value: float) -> str:

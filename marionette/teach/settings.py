@@ -52,6 +52,7 @@ from .axis_map import AxisMap
 from .filters import DEFAULT_CUTOFF, SoftLimit, soft_limit_for_areas
 from .triangulate import DEFAULT_MAX_RESIDUAL_PX
 from marionette.errors import ArgumentError, MarionetteError
+from marionette.textfile import read_text
 
 FITS = ("linear", "nonlinear")
 
@@ -152,8 +153,7 @@ def load_settings(path=None) -> TeachSettings:
     """Read teach settings; None gives the bundled settings for the bundled figure."""
     path = default_settings_path() if path is None else Path(path)
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+        data = tomllib.loads(read_text(path, SettingsError))
     except FileNotFoundError:
         raise SettingsError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:
