@@ -114,3 +114,16 @@ def test_sim_control_lines_are_checked():
         assert repr(line) in str(info.value) and said in str(info.value), line
     assert faults.apply("silence 5") == "node 5 silenced" and faults.silent == {5}
     assert faults.apply("corrupt 0.25") == "corrupt_rate = 0.25"
+
+
+@pytest.mark.skipif(not os.path.exists("/dev/full"), reason="needs /dev/full (Linux)")
+def test_a_flight_record_that_cannot_be_written_is_named(capsys):
+    refused(capsys, "play", "--ticks", "5", "--record", "/dev/full",
+            names=["/dev/full", "cannot write the flight record", "No space left"])
+
+
+def test_sim_names_music_it_cannot_measure(tmp_path, capsys):
+    from marionette.music.feature import write_wav
+    low = tmp_path / "low.wav"
+    write_wav(low, np.zeros(4000), 4000)                       # under the 8 kHz the band needs
+    refused(capsys, "sim", "--seconds", "0.1", "--music", low, names=[str(low), "4000"])

@@ -96,8 +96,12 @@ def run(args) -> int:
                     nodes=frozenset(nodes))
     music = None
     if args.music:
-        from marionette.music.feature import read_wav
+        from marionette.music.feature import AudioError, LoudnessMeter, read_wav
         music = read_wav(args.music)
+        try:
+            LoudnessMeter(music[1])        # a rate the node can measure
+        except AudioError as exc:
+            raise AudioError(f"{args.music}: {exc}") from None
     node = args.loudness_node if args.loudness_node is not None else nodes[-1]
     figure = SimFigure(config, faults, args.watchdog_ticks or DEFAULT_WATCHDOG_TICKS,
                        trace=bool(args.trace), music=music, music_node=node,
