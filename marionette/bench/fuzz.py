@@ -176,7 +176,8 @@ def register(sub) -> None:
                     "no crash, no hang, frames/s, corrupt frames accepted against the CRC's odds.")
     parser.add_argument("--frames", type=Number(int, 1), default=DEFAULT_FRAMES,
                         help=f"serial frames (default {DEFAULT_FRAMES}; CAN frames: about a quarter more)")
-    parser.add_argument("--seed", type=Number(int, 0, 2**64 - 1), default=SEED, help="seed of the fuzzer")
+    parser.add_argument("--seed", type=Number(int, 0, 2**64 - 1), default=SEED,
+                        help="seed of the fuzzer")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
     parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)

@@ -143,7 +143,8 @@ def register(sub) -> None:
     parser = sub.add_parser(
         "link", help="latency from the tick to a decoded frame in the simulator; codec rates",
         description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=Number(float, 0.0, above=True), default=5.0, help="real-time run per link [s]")
+    parser.add_argument("--seconds", type=Number(float, 0.0, above=True), default=5.0,
+                        help="real-time run per link [s]")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
 
 

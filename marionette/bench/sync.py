@@ -560,7 +560,8 @@ def register(sub) -> None:
     parser.add_argument("--quick", action="store_true",
                         help="one short piece, two scenarios, their top variants and one wrong-cue "
                              "deck (smoke test; figures meaningless)")
-    parser.add_argument("--seed", type=SEED_OPTION, default=SEED, help="seed of the first set of scenarios")
+    parser.add_argument("--seed", type=SEED_OPTION, default=SEED,
+                        help="seed of the first set of scenarios")
     parser.add_argument("--seeds", type=Number(int, 1), default=SEEDS, metavar="N",
                         help=f"sets of scenarios, seeds SEED to SEED + N - 1 (default {SEEDS}): "
                              "tuning to one set does not pass")

@@ -223,7 +223,8 @@ def register(sub) -> None:
                         help="axis counts to run (default: 16 256 4096)")
     parser.add_argument("--ticks", type=Number(int, 1), default=None, metavar="N",
                         help="ticks per axis count (default: 20000 for 16 and 256 axes, 5000 for 4096)")
-    parser.add_argument("--seed", type=SEED_OPTION, default=SEED, help="seed of the synthetic figure and show")
+    parser.add_argument("--seed", type=SEED_OPTION, default=SEED,
+                        help="seed of the synthetic figure and show")
     parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
 
 

@@ -135,7 +135,8 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("calibrate", help="identify the cameras from known markers (teach-in)",
                               description="Identify the cameras from known markers and write "
                               "cameras.toml for `marionette teach` (docs/teach.md).")
-    p.add_argument("markers", nargs="?", type=input_file, help="marker file (CSV: camera,marker,x,y,z,R,T)")
+    p.add_argument("markers", nargs="?", type=input_file,
+                   help="marker file (CSV: camera,marker,x,y,z,R,T)")
     p.add_argument("-o", "--output", required=True, type=output_file,
                    help="cameras file to write (TOML)")
     p.add_argument("--sample", action="store_true", help="use the bundled sample's markers")
@@ -149,8 +150,10 @@ def register(subparsers) -> None:
                    help="minimise the paper's eq. 4.8 error [m] or the reprojection error [pixel]")
     p.add_argument("--image-size", default="512x512",
                    help="sensor COLUMNSxROWS [pixel]; the optical axis is its centre (default 512x512)")
-    p.add_argument("--guess", type=input_file, help="starting cameras (cameras.toml format; angles or target = "
-                                   "[x, y, z]); default: found linearly from the markers")
-    p.add_argument("--max-iter", type=Number(int, 1), help="iteration limit (default 200 for lm, 20000 for "
-                                                "steepest-descent)")
+    p.add_argument("--guess", type=input_file,
+                   help="starting cameras (cameras.toml format; angles or target = "
+                        "[x, y, z]); default: found linearly from the markers")
+    p.add_argument("--max-iter", type=Number(int, 1),
+                   help="iteration limit (default 200 for lm, 20000 for "
+                        "steepest-descent)")
     p.set_defaults(run=run)

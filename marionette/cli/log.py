@@ -405,7 +405,8 @@ def register(subparsers) -> None:
                               description="Summarize a flight record written by `marionette play "
                               "--record` (docs/formats.md); --csv exports every tick, --plot draws it.")
     p.add_argument("record", type=input_file, help="flight record (.bin) written by play --record")
-    p.add_argument("--csv", metavar="OUT.csv", type=output_file, help="write one row per tick, every field")
+    p.add_argument("--csv", metavar="OUT.csv", type=output_file,
+                   help="write one row per tick, every field")
     p.add_argument("--plot", nargs="?", const="", metavar="OUT.png", type=_plot_file,
                    help="draw the record (default file: the record's name with .png); needs matplotlib")
     p.add_argument("--axes", metavar="A,B", help="axes whose commands --plot draws "

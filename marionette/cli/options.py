@@ -1,7 +1,7 @@
 """Options that more than one command takes, and the argparse types that
-check a value when it is parsed: a number in its range, a file to write.
-A refused value is argparse's error, which names the option and the value
-(exit status 2)."""
+check a value when it is parsed: a number in its range, a file to read, a
+file (or an image) to write. A refused value is argparse's error, which
+names the option and the value (exit status 2)."""
 from __future__ import annotations
 
 import argparse
@@ -82,16 +82,16 @@ def output_file(text: str) -> str:
         raise argparse.ArgumentTypeError("an empty path")
     path = Path(text)
     if path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text!r} is a folder, not a file")
+        raise argparse.ArgumentTypeError(f"{text}: a folder, not a file")
     if path.exists():
         if not os.access(path, os.W_OK):
-            raise argparse.ArgumentTypeError(f"{text!r}: no permission to write it")
+            raise argparse.ArgumentTypeError(f"{text}: no permission to write it")
         return text
     folder = path.parent
     if not folder.is_dir():
-        raise argparse.ArgumentTypeError(f"{text!r}: the folder {str(folder)!r} does not exist")
+        raise argparse.ArgumentTypeError(f"{text}: the folder {folder} does not exist")
     if not os.access(folder, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"{text!r}: no permission to write in {str(folder)!r}")
+        raise argparse.ArgumentTypeError(f"{text}: no permission to write in {folder}")
     return text
 
 
@@ -106,7 +106,7 @@ def image_file(text: str) -> str:
     formats = FigureCanvasBase.get_supported_filetypes()
     if Path(text).suffix.lower().lstrip(".") not in formats:
         raise argparse.ArgumentTypeError(
-            f"{text!r}: unknown image format {Path(text).suffix or '(no suffix)'!r} "
+            f"{text}: unknown image format {Path(text).suffix or '(no suffix)'!r} "
             f"(use one of {', '.join('.' + f for f in sorted(formats))})")
     return text
 

@@ -34,12 +34,14 @@ def register(sub) -> None:
                        "a file (--output) or nowhere; following live music (--music, "
                        "--audio-device) or not. Prints a summary; a flight record with --record.")
     figure_args(p)
-    p.add_argument("--realtime", action="store_true", help="run the real-time loop (default: step mode)")
+    p.add_argument("--realtime", action="store_true",
+                   help="run the real-time loop (default: step mode)")
     p.add_argument("--headless", action="store_true",
                    help="no live console: in real time one status line per second on stderr "
                         "(also whenever stdout is not a terminal; docs/console.md)")
     p.add_argument("--json", action="store_true", help="the status lines as JSON lines (headless)")
-    p.add_argument("--ticks", type=TICKS, help=f"ticks to run, {TICKS.range} (default: the whole show)")
+    p.add_argument("--ticks", type=TICKS,
+                   help=f"ticks to run, {TICKS.range} (default: the whole show)")
     p.add_argument("--rate", type=RATE, default=1.0,
                    help=f"playback rate [show ticks per tick], {RATE.range} (default 1: as taught)")
     p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag",
@@ -66,8 +68,9 @@ def register(sub) -> None:
     p.add_argument("--follow", choices=("smooth", "paper"),
                    help="follow the live music (default mode with --music or --audio-device: "
                         "the figure's [follow] table)")
-    p.add_argument("--music", type=input_file, help="the live music from this recording, played back as if live "
-                                   "(a silent or short one, or one never locked on, is warned about)")
+    p.add_argument("--music", type=input_file,
+                   help="the live music from this recording, played back as if live "
+                        "(a silent or short one, or one never locked on, is warned about)")
     add_start_argument(p)
     p.add_argument("--audio-device", nargs="?", const="",
                    help="the live music from this sound card input (its index or a part of its "

@@ -29,7 +29,8 @@ def register(sub) -> None:
                        help="CAN: an slcan adapter emulated on a pty, or python-can's udp_multicast")
     p.add_argument("--channel", default="239.74.163.2",
                    help="udp_multicast group address (with --can udp_multicast)")
-    p.add_argument("--seconds", type=Number(float, 0.0, above=True), help="stop after this long [s] (default: until 'quit')")
+    p.add_argument("--seconds", type=Number(float, 0.0, above=True),
+                   help="stop after this long [s] (default: until 'quit')")
     p.add_argument("--watchdog-ticks", type=Number(int, 1, 65535), default=None,
                    help="ticks without a setpoint before a node stops (default: SPEC.md's)")
     p.add_argument("--drop", type=PROBABILITY, default=0.0,
@@ -43,17 +44,20 @@ def register(sub) -> None:
     p.add_argument("--silent", type=Number(int, 0, 255), nargs="*", default=[],
                    help="nodes that do not answer (nodes of the figure)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the fault injection")
-    p.add_argument("--trace", type=output_file, help="write, at each SYNC, its arrival time (model time [s]; t0: "
-                                   "CLOCK_MONOTONIC of model time 0), tick, the simulated "
-                                   "positions [unit] and their model time (whole 1 ms steps) "
-                                   "to this .npz")
+    p.add_argument("--trace", type=output_file,
+                   help="write, at each SYNC, its arrival time (model time [s]; t0: "
+                        "CLOCK_MONOTONIC of model time 0), tick, the simulated "
+                        "positions [unit] and their model time (whole 1 ms steps) "
+                        "to this .npz")
     p.add_argument("--no-accel-clip", action="store_true",
                    help="drives that do not clip acceleration (only speed and position limits), "
                         "so that a command stream asking too much shows in the summary's "
                         "peak_accel [unit/s^2, from positions sampled once per tick]")
-    p.add_argument("--music", type=input_file, help="a node measures this recording's loudness, played from the "
-                                   "start of the run, and reports it in LOUDNESS messages")
-    p.add_argument("--loudness-node", type=Number(int, 0, 255), help="the node that does (default: the figure's last)")
+    p.add_argument("--music", type=input_file,
+                   help="a node measures this recording's loudness, played from the "
+                        "start of the run, and reports it in LOUDNESS messages")
+    p.add_argument("--loudness-node", type=Number(int, 0, 255),
+                   help="the node that does (default: the figure's last)")
     p.add_argument("--priority", type=PRIORITY, default=0,
                    help="run at this SCHED_FIFO priority when permitted (0: normal), so the "
                         "simulated nodes keep time on a busy machine")

@@ -201,12 +201,16 @@ def register(sub) -> None:
     p.add_argument("--taught", required=True, type=input_file,
                    help="the music as taught (WAV), or a show (.npz, .csv) whose stored loudness "
                         "the engine would follow")
-    p.add_argument("--live", required=True, type=input_file, help="the music as played at the show (WAV)")
-    p.add_argument("--out", required=True, type=output_file, help="track to write (CSV, one row per tick)")
+    p.add_argument("--live", required=True, type=input_file,
+                   help="the music as played at the show (WAV)")
+    p.add_argument("--out", required=True, type=output_file,
+                   help="track to write (CSV, one row per tick)")
     p.add_argument("--mode", choices=FOLLOW_MODES, default="smooth",
                    help="smooth (fractional rate, default) or paper (double or skip a sample)")
-    p.add_argument("--truth", type=input_file, help="CSV tick,position_s: print the accuracy against it")
-    p.add_argument("--config", type=input_file, help="figure TOML for the tick period and [follow] settings")
+    p.add_argument("--truth", type=input_file,
+                   help="CSV tick,position_s: print the accuracy against it")
+    p.add_argument("--config", type=input_file,
+                   help="figure TOML for the tick period and [follow] settings")
     add_start_argument(p)
     p.add_argument("--loudness-only", action="store_true",
                    help="live frames without onsets, as servo nodes send them (LOUDNESS)")

@@ -231,8 +231,10 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("teach", help="recording of the dancer -> show for the figure (teach-in)",
                               description="Turn a recording of the dancer's LEDs into a show for the "
                               "figure, with the music's loudness (docs/teach.md).")
-    p.add_argument("recording", nargs="?", type=input_file, help="recording of LED detections (CSV: time_s,camera,led,R,T)")
-    p.add_argument("--cameras", required=True, type=input_file, help="cameras file written by `marionette calibrate`")
+    p.add_argument("recording", nargs="?", type=input_file,
+                   help="recording of LED detections (CSV: time_s,camera,led,R,T)")
+    p.add_argument("--cameras", required=True, type=input_file,
+                   help="cameras file written by `marionette calibrate`")
     music = p.add_mutually_exclusive_group(required=True)
     music.add_argument("--music", metavar="MUSIC.wav", type=input_file,
                        help="the music the dancer danced to (WAV); its loudness goes into the show")
@@ -241,8 +243,9 @@ def register(subparsers) -> None:
                             "and --music)")
     p.add_argument("-o", "--output", required=True, type=output_file, help="show to write (.npz)")
     p.add_argument("--config", type=input_file, help=CONFIG_HELP)
-    p.add_argument("--settings", type=input_file, help="teach settings TOML (rucksack, filters, areas, axis map); "
-                                      "default: the bundled one for the bundled figure")
+    p.add_argument("--settings", type=input_file,
+                   help="teach settings TOML (rucksack, filters, areas, axis map); "
+                        "default: the bundled one for the bundled figure")
     p.add_argument("--policy", choices=POLICIES, default="reduce",
                    help="pragmatic filter, infeasible moves: reduce the excursion (default), "
                         "borrow time from the preceding rest, or reject (error)")
