@@ -127,3 +127,14 @@ def test_sim_names_music_it_cannot_measure(tmp_path, capsys):
     low = tmp_path / "low.wav"
     write_wav(low, np.zeros(4000), 4000)                       # under the 8 kHz the band needs
     refused(capsys, "sim", "--seconds", "0.1", "--music", low, names=[str(low), "4000"])
+
+
+def test_sim_answers_bad_control_lines_with_an_error_and_runs_on(sim):
+    """Through the simulator process's stdin, as an operator types them."""
+    s = sim("--serial")
+    for line, said in [("silence 99", "there is no node 99 (nodes: 1, 2, 3, 4, 5)"),
+                       ("corrupt abc", "'abc' is not a number")]:
+        answer = s.control(line)
+        assert set(answer) == {"error"} and repr(line) in answer["error"] and said in answer["error"]
+    assert s.control("silence 5") == {"ok": "node 5 silenced"}
+    s.quit()
