@@ -54,7 +54,7 @@ from marionette.cli.options import Number
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
-from marionette.errors import ArgumentError, MarionetteError
+from marionette.errors import MarionetteError
 from marionette.show import load_show
 
 PRIORITY = 80             # SCHED_FIFO priority of the tick thread and of cyclictest [1..99]

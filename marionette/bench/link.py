@@ -38,7 +38,7 @@ from marionette.cli.options import Number
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
-from marionette.errors import ArgumentError, MarionetteError
+from marionette.errors import MarionetteError
 from marionette.show import load_show
 
 PRIORITY = 40           # SCHED_FIFO of the engine, when permitted

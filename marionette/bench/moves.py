@@ -23,7 +23,7 @@ from marionette._core import plan_move
 from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
 from marionette.cli.options import SEED as SEED_OPTION, Number
-from marionette.errors import ArgumentError, MarionetteError
+from marionette.errors import MarionetteError
 
 CASES = 10_000
 SEED = 20261122
