@@ -13,6 +13,7 @@ from libc.math cimport NAN
 from libc.string cimport memcpy
 
 from marionette._cengine cimport *
+from marionette.errors import ArgumentError
 
 cnp.import_array()
 
@@ -98,12 +99,12 @@ cdef class CoreEngine:
         axes = np.ascontiguousarray(axes, dtype=AXIS_DTYPE)
         cdef size_t n_axes = axes.shape[0]
         if show.shape[0] != n_axes or loudness.shape[0] != show.shape[1]:
-            raise ValueError("show must be (axes, ticks) and loudness (ticks,)")
+            raise ArgumentError("show must be (axes, ticks) and loudness (ticks,)")
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] c_onsets = None
         if onsets is not None:
             c_onsets = np.ascontiguousarray(onsets, dtype=np.float64)
             if c_onsets.shape[0] != show.shape[1]:
-                raise ValueError("onsets must be (ticks,)")
+                raise ArgumentError("onsets must be (ticks,)")
         cdef mar_axis *c_axes = <mar_axis *>calloc(max(n_axes, 1), sizeof(mar_axis))
         if c_axes == NULL:
             raise MemoryError()
@@ -136,7 +137,7 @@ cdef class CoreEngine:
         if opt.follow:
             if len(follow_options) != sizeof(mar_follow_options):
                 free(c_axes)
-                raise ValueError(f"follow_options must be {sizeof(mar_follow_options)} bytes")
+                raise ArgumentError(f"follow_options must be {sizeof(mar_follow_options)} bytes")
             memcpy(&opt.follow_opt, <const char *>follow_options, sizeof(mar_follow_options))
         cdef int status = 0
         self.engine = mar_engine_create(&opt, c_axes, n_axes, &show[0, 0], show.shape[1],
@@ -144,7 +145,7 @@ cdef class CoreEngine:
                                         &status)
         free(c_axes)
         if self.engine == NULL:
-            raise ValueError(f"the C engine refused its configuration (status {status})")
+            raise ArgumentError(f"the C engine refused its configuration (status {status})")
         self.loop = <mar_rtloop *>calloc(1, sizeof(mar_rtloop))
         if self.loop == NULL:
             raise MemoryError()
@@ -214,7 +215,7 @@ cdef class CoreEngine:
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] t = np.ascontiguousarray(
             np.full(self.n_axes, np.nan) if targets is None else targets, dtype=np.float64)
         if t.shape[0] != self.n_axes:
-            raise ValueError(f"{t.shape[0]} targets for {self.n_axes} axes")
+            raise ArgumentError(f"{t.shape[0]} targets for {self.n_axes} axes")
         return mar_engine_request(self.engine, kind, &t[0], synchronized)
 
     def set_sink(self, int kind, int fd, size_t ring_slots, int protocol=MAR_SINK_SERIAL):

@@ -12,6 +12,8 @@ from libc.stdint cimport int64_t, uint32_t, uint64_t
 from libc.math cimport NAN
 from posix.time cimport clock_gettime, timespec, CLOCK_MONOTONIC
 
+from marionette.errors import ArgumentError
+
 cnp.import_array()
 
 
@@ -149,11 +151,11 @@ cdef int _set_options(mar_follow_options *o, dict options) except -1:
             raise KeyError(key)
         if key == "mode":
             if value not in MODES:
-                raise ValueError(key)
+                raise ArgumentError(key)
             value = MODES[value]
         if info["kind"] == "int":
             if isinstance(value, bool) or int(value) != value or not (-2**31 <= value < 2**31):
-                raise ValueError(key)
+                raise ArgumentError(key)
             (<int *>(base + <size_t>info["offset"]))[0] = int(value)
         else:
             (<double *>(base + <size_t>info["offset"]))[0] = float(value)
@@ -182,19 +184,19 @@ cdef class Follower:
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] s = np.ascontiguousarray(stored, dtype=np.float64)
         cdef size_t n = s.shape[0]
         if n == 0:
-            raise ValueError(-22)
+            raise ArgumentError(-22)
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] on
         if onset is not None:
             on = np.ascontiguousarray(onset, dtype=np.float64)
             if on.shape[0] != n:
-                raise ValueError(-22)
+                raise ArgumentError(-22)
             with nogil:
                 self.f = mar_follow_create_onsets(&o, &s[0], &on[0], n, &status)
         else:
             with nogil:
                 self.f = mar_follow_create(&o, &s[0], n, &status)
         if self.f == NULL:
-            raise ValueError(status)
+            raise ArgumentError(status)
 
     def __dealloc__(self):
         if self.f != NULL:
@@ -222,7 +224,7 @@ cdef class Follower:
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] ov = (
             np.full(n, np.nan) if onset is None else np.ascontiguousarray(onset, dtype=np.float64))
         if ov.shape[0] != n:
-            raise ValueError(-22)
+            raise ArgumentError(-22)
         position = np.empty(n)
         rate = np.empty(n)
         confidence = np.empty(n)

@@ -21,6 +21,7 @@ from libc.stdint cimport int32_t, uint8_t, uint16_t, uint32_t, uint64_t
 from libc.string cimport memset
 
 from marionette._cprotocol cimport *
+from marionette.errors import ArgumentError
 
 VERSION = MAR_PROTO_VERSION
 BROADCAST = MAR_BROADCAST
@@ -87,8 +88,8 @@ cdef int to_msg(object raw, mar_msg *m) except -1:
             entries = payload[0]
             n = len(entries)
             if n > MAR_SETPOINT_MAX:
-                raise ValueError(f"{n} setpoints in one frame; at most {MAR_SETPOINT_MAX} "
-                                 f"(encode_setpoints splits any number)")
+                raise ArgumentError(f"{n} setpoints in one frame; at most {MAR_SETPOINT_MAX} "
+                                    f"(encode_setpoints splits any number)")
             for i in range(n):
                 m.setpoint.entry[i].node, m.setpoint.entry[i].channel, m.setpoint.entry[i].counts = entries[i]
             m.setpoint.n = <uint16_t>n
@@ -96,7 +97,7 @@ cdef int to_msg(object raw, mar_msg *m) except -1:
             m.config.tick_period_us, m.config.watchdog_ticks, channels = payload
             n = len(channels)
             if n > MAR_CONFIG_MAX:
-                raise ValueError(f"{n} channels in one CONFIG; at most {MAR_CONFIG_MAX}")
+                raise ArgumentError(f"{n} channels in one CONFIG; at most {MAR_CONFIG_MAX}")
             for i in range(n):
                 c = channels[i]
                 m.config.channel[i].channel = c[0]
@@ -109,7 +110,7 @@ cdef int to_msg(object raw, mar_msg *m) except -1:
             m.status.flags, m.status.state, m.status.rejected, m.status.seq_gaps, positions = payload
             n = len(positions)
             if n > MAR_STATUS_MAX:
-                raise ValueError(f"{n} positions in one STATUS; at most {MAR_STATUS_MAX}")
+                raise ArgumentError(f"{n} positions in one STATUS; at most {MAR_STATUS_MAX}")
             for i in range(n):
                 m.status.position[i] = positions[i]
             m.status.n = <uint8_t>n
@@ -118,12 +119,12 @@ cdef int to_msg(object raw, mar_msg *m) except -1:
         elif kind == MAR_MSG_LOUDNESS:
             value = float(payload[0])
             if not (0.0 <= value <= FLT_MAX):
-                raise ValueError(f"loudness {value!r}: must be finite and >= 0")
+                raise ArgumentError(f"loudness {value!r}: must be finite and >= 0")
             m.loudness.value = <float>value
         elif kind == MAR_MSG_NACK:
             m.nack.reason, m.nack.flags, m.nack.ref_type, m.nack.ref_seq = payload
     except OverflowError as exc:
-        raise ValueError(f"a field of message type 0x{raw[0]:02x} is out of its range: {exc}") from None
+        raise ArgumentError(f"a field of message type 0x{raw[0]:02x} is out of its range: {exc}") from None
     return 0
 
 
@@ -177,7 +178,7 @@ def cobs_decode(const uint8_t[::1] data):
     cdef uint8_t *o = out
     cdef long k = mar_cobs_decode(&data[0], n, o, n) if n else 0
     if k < 0:
-        raise ValueError("invalid COBS encoding")
+        raise ArgumentError("invalid COBS encoding")
     return bytes(out[:k])
 
 
@@ -213,7 +214,7 @@ def encode_setpoints(uint32_t tick, entries):
         for i in range(n):
             es[i].node, es[i].channel, es[i].counts = entries[i]
     except OverflowError as exc:
-        raise ValueError(f"setpoint entry {i} out of range: {exc}") from None
+        raise ArgumentError(f"setpoint entry {i} out of range: {exc}") from None
     out = bytearray(mar_setpoints_wire_max(n))
     cdef uint8_t *o = out
     cdef long k = mar_encode_setpoints(tick, es, n, o, len(out))
@@ -306,7 +307,7 @@ def can_encode_setpoints(uint32_t tick, entries):
         for i in range(n):
             es[i].node, es[i].channel, es[i].counts = entries[i]
     except OverflowError as exc:
-        raise ValueError(f"setpoint entry {i} out of range: {exc}") from None
+        raise ArgumentError(f"setpoint entry {i} out of range: {exc}") from None
     cdef long k = mar_can_encode_setpoints(tick, es, n, f, n)
     if k < 0:
         return k

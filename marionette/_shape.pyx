@@ -11,6 +11,8 @@ cimport numpy as cnp
 from libc.stdint cimport int32_t, int64_t
 from libc.stdlib cimport calloc, free
 
+from marionette.errors import ArgumentError
+
 cnp.import_array()
 
 
@@ -150,7 +152,7 @@ def extrema(x, double prominence, double rest_tolerance):
     cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] xx = np.ascontiguousarray(x, dtype=np.float64)
     cdef size_t n = xx.shape[0], count = 0, i
     if n == 0:
-        raise ValueError("extrema: empty trajectory")
+        raise ArgumentError("extrema: empty trajectory")
     cdef mar_shape_extremum *buf = <mar_shape_extremum *>calloc(n, sizeof(mar_shape_extremum))
     if buf == NULL:
         raise MemoryError()
@@ -175,11 +177,11 @@ def shape_axis(x, double period, double max_speed, double max_accel, double pos_
     status is the number of infeasible segments (>= 0) or a negative errno.
     """
     if policy not in POLICIES:
-        raise ValueError(f"policy must be one of {sorted(POLICIES)}, not {policy!r}")
+        raise ArgumentError(f"policy must be one of {sorted(POLICIES)}, not {policy!r}")
     cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] xx = np.ascontiguousarray(x, dtype=np.float64)
     cdef size_t n = xx.shape[0], n_ext = 0, n_seg = 0, i
     if n == 0:
-        raise ValueError("shape_axis: empty trajectory")
+        raise ArgumentError("shape_axis: empty trajectory")
     cdef mar_shape_options opt
     opt.period = period
     opt.max_speed = max_speed

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from marionette import _follow
 from marionette.errors import ConfigError
+from marionette.textfile import read_text
 
 UNITS = ("m", "rad")
 DEFAULT_TICK_PERIOD = 0.020  # [s]
@@ -286,8 +287,7 @@ def load_config(path: str | Path | None = None) -> FigureConfig:
     """Read and validate a figure TOML file; None gives the bundled Hoffmann 1996 figure."""
     path = Path(path) if path is not None else default_config_path()
     try:
-        with open(path, "rb") as f:
-            data = tomllib.load(f)
+        data = tomllib.loads(read_text(path, ConfigError))
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:

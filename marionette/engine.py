@@ -24,7 +24,7 @@ import numpy as np
 
 from marionette import _core
 from marionette.config import FigureConfig
-from marionette.errors import EngineError
+from marionette.errors import ArgumentError, EngineError
 from marionette.music.follower import (DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
                                        engine_options as follower_options)
 from marionette.music.node_source import NodeLoudness
@@ -130,7 +130,7 @@ class Engine:
                  follow: str | None = None, poll: str = "all", follow_start: float | None = DEFAULT_START,
                  on_lost: str | None = None, end: str | None = None):
         if end not in END_ACTIONS:
-            raise ValueError(f"end must be one of {END_ACTIONS}, not {end!r}")
+            raise ArgumentError(f"end must be one of {END_ACTIONS}, not {end!r}")
         self.end = end
         self._end_thread: threading.Thread | None = None
         self._rested = threading.Event()
@@ -138,16 +138,16 @@ class Engine:
         self._until_show_end = False        # start(until_show_end=True): the show's end ends the run
         self._cancel_end = threading.Event()
         if lead not in LEAD_MODES:
-            raise ValueError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
+            raise ArgumentError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
         if interpolation not in INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of {sorted(INTERPOLATIONS)}, "
-                             f"not {interpolation!r}")
+            raise ArgumentError(f"interpolation must be one of {sorted(INTERPOLATIONS)}, "
+                                f"not {interpolation!r}")
         on_lost = config.follow.on_lost if on_lost is None else on_lost
         if on_lost not in ON_LOST:
-            raise ValueError(f"on_lost must be one of {sorted(ON_LOST)}, not {on_lost!r}")
+            raise ArgumentError(f"on_lost must be one of {sorted(ON_LOST)}, not {on_lost!r}")
         protocol = protocol or getattr(output, "protocol", "serial")
         if protocol not in PROTOCOLS:
-            raise ValueError(f"protocol must be one of {sorted(PROTOCOLS)}, not {protocol!r}")
+            raise ArgumentError(f"protocol must be one of {sorted(PROTOCOLS)}, not {protocol!r}")
         self.protocol = protocol
         self.config = config
         self.show = fit_to_figure(show, config, on_limits)
@@ -175,10 +175,10 @@ class Engine:
         self._writer = None
         self._attach_output(output)
         if poll not in ("all", "one"):
-            raise ValueError(f"poll must be 'all' or 'one', not {poll!r}")
+            raise ArgumentError(f"poll must be 'all' or 'one', not {poll!r}")
         if poll == "one":
             if self.protocol != "serial":
-                raise ValueError("poll='one' is for a serial line; a CAN SYNC polls every node")
+                raise ArgumentError("poll='one' is for a serial line; a CAN SYNC polls every node")
             _raise_for(self._core.set_poll(True), "poll")
         # the servo nodes' LOUDNESS as a live source, when the music is followed
         self.node_loudness = NodeLoudness(self.push_loudness).start() if follow else None
@@ -199,16 +199,16 @@ class Engine:
         otherwise; this says which axis and why)."""
         for a in self.config.axes:
             if self.protocol == "serial" and a.node == 255:
-                raise ValueError(f"axis {a.name!r}: node 255 is the broadcast address of the "
-                                 f"serial protocol; use nodes 0..254")
+                raise ArgumentError(f"axis {a.name!r}: node 255 is the broadcast address of the "
+                                    f"serial protocol; use nodes 0..254")
             if self.protocol == "can":
                 if not 1 <= a.node <= 127 or a.channel > 8:
-                    raise ValueError(f"axis {a.name!r}: node {a.node}, channel {a.channel} cannot be "
-                                     f"carried on CAN (nodes 1..127, channels 0..8)")
+                    raise ArgumentError(f"axis {a.name!r}: node {a.node}, channel {a.channel} cannot be "
+                                        f"carried on CAN (nodes 1..127, channels 0..8)")
                 reach = max(abs(a.offset + a.scale * a.min), abs(a.offset + a.scale * a.max))
                 if reach > CAN_COUNTS_MAX:
-                    raise ValueError(f"axis {a.name!r}: its limits reach {reach:.0f} counts; CAN "
-                                     f"setpoints carry at most +-{CAN_COUNTS_MAX} (smaller scale, or serial)")
+                    raise ArgumentError(f"axis {a.name!r}: its limits reach {reach:.0f} counts; CAN "
+                                        f"setpoints carry at most +-{CAN_COUNTS_MAX} (smaller scale, or serial)")
 
     def _attach_output(self, output) -> None:
         if output is None:
@@ -237,7 +237,7 @@ class Engine:
     def step(self, n: int = 1) -> None:
         """Run n ticks on the virtual clock, as fast as the CPU allows."""
         if n < 0:
-            raise ValueError(f"cannot step {n} ticks")
+            raise ArgumentError(f"cannot step {n} ticks")
         chunk = RECORD_SLOTS // 2
         while n > 0:
             k = min(n, chunk)
@@ -257,7 +257,7 @@ class Engine:
         until_show_end: it stops at the show's end (FLAG_END) too, which a
         show following slow music reaches after more ticks than it has."""
         if not 0 <= priority <= 99:
-            raise ValueError(f"priority must be 0..99, not {priority}")
+            raise ArgumentError(f"priority must be 0..99, not {priority}")
         self._until_show_end = until_show_end
         safe_end = self.end is not None and self.supervisor is not None and max_ticks > 0
         status, report = self._core.start(priority, -1 if cpu is None else cpu,
@@ -416,13 +416,13 @@ class Engine:
     def set_rate(self, rate: float) -> None:
         """Playback rate [show ticks per tick]; 1 plays as taught, 0 holds."""
         if not (0.0 <= rate <= MAX_RATE):
-            raise ValueError(f"rate {rate!r} is outside [0, {MAX_RATE}] show ticks per tick")
+            raise ArgumentError(f"rate {rate!r} is outside [0, {MAX_RATE}] show ticks per tick")
         _raise_for(self._core.set_rate(float(rate)), "set_rate")
 
     def seek(self, position: float) -> None:
         """Jump the playback position [show ticks]; the hard limits smooth the jump."""
         if not (0.0 <= position <= self.show.n_ticks - 1):
-            raise ValueError(f"position {position!r} is outside [0, {self.show.n_ticks - 1}] ticks")
+            raise ArgumentError(f"position {position!r} is outside [0, {self.show.n_ticks - 1}] ticks")
         _raise_for(self._core.seek(float(position)), "seek")
 
     def _latest_tick(self) -> int | None:
@@ -467,8 +467,8 @@ class Engine:
         place its tracking peak on them."""
         status = self._core.push_loudness(float(value), float(onset))
         if status == -errno.EINVAL:
-            raise ValueError(f"live frame {value!r} (onset {onset!r}) refused: the loudness must be "
-                             "finite and >= 0, the onset NaN or finite and >= 0")
+            raise ArgumentError(f"live frame {value!r} (onset {onset!r}) refused: the loudness must be "
+                                "finite and >= 0, the onset NaN or finite and >= 0")
         _raise_for(status, "push_loudness")
 
     def _pose(self, pose, fill) -> np.ndarray:
@@ -476,23 +476,23 @@ class Engine:
         named get fill (None: every axis must be named)."""
         if isinstance(pose, str):
             if pose != "home":
-                raise ValueError(f"unknown pose {pose!r} (use 'home' or a mapping axis -> position)")
+                raise ArgumentError(f"unknown pose {pose!r} (use 'home' or a mapping axis -> position)")
             pose = {a.name: a.home for a in self.config.axes}
         unknown = set(pose) - set(self.config.axis_names)
         if unknown:
-            raise ValueError(f"pose names unknown axis {sorted(unknown)[0]!r} "
-                             f"(known: {', '.join(self.config.axis_names)})")
+            raise ArgumentError(f"pose names unknown axis {sorted(unknown)[0]!r} "
+                                f"(known: {', '.join(self.config.axis_names)})")
         out = np.empty(len(self.config.axes))
         for j, axis in enumerate(self.config.axes):
             if axis.name not in pose:
                 if fill is None:
-                    raise ValueError(f"pose has no position for axis {axis.name!r}")
+                    raise ArgumentError(f"pose has no position for axis {axis.name!r}")
                 out[j] = fill
                 continue
             x = float(pose[axis.name])
             if not axis.min <= x <= axis.max:
-                raise ValueError(f"pose: axis {axis.name!r} position {x!r} {axis.unit} is outside "
-                                 f"its limits [{axis.min!r}, {axis.max!r}]")
+                raise ArgumentError(f"pose: axis {axis.name!r} position {x!r} {axis.unit} is outside "
+                                    f"its limits [{axis.min!r}, {axis.max!r}]")
             out[j] = x
         return out
 
@@ -548,7 +548,7 @@ class Engine:
         """The 'wake' (latency) or 'compute' histogram: bucket lower bounds
         [ns], widths [ns], counts, and the exact maximum [ns]."""
         if which not in ("wake", "compute"):
-            raise ValueError(f"histogram is 'wake' or 'compute', not {which!r}")
+            raise ArgumentError(f"histogram is 'wake' or 'compute', not {which!r}")
         return self._core.histogram(which)
 
     def stats(self) -> dict:

@@ -21,7 +21,12 @@ class TeachError(MarionetteError, ValueError):
     """Teach-in input (markers, cameras, recording, settings) is invalid or unusable."""
 
 
-class LineError(ValueError):
+class ArgumentError(MarionetteError, ValueError):
+    """A function was given a value outside its domain: an input its caller
+    passed on unchecked, or a programming error."""
+
+
+class LineError(MarionetteError, ValueError):
     """A line of a text file is malformed; ``path``, ``line`` (1-based) and
     ``value`` say where."""
 

@@ -61,6 +61,7 @@ import struct
 from dataclasses import dataclass
 
 from marionette import _protocol as _p
+from marionette.errors import ArgumentError, MarionetteError
 
 VERSION = _p.VERSION
 BROADCAST = _p.BROADCAST                # node address of "every node"
@@ -142,7 +143,7 @@ CAN_RECORD_BYTES = 16                   # ext/mar_sink.h: struct can_frame layou
 _RECORD = struct.Struct("<IB3x8s")
 
 
-class ProtocolError(ValueError):
+class ProtocolError(MarionetteError, ValueError):
     """A frame that could not be decoded, or a message that cannot be encoded."""
 
     def __init__(self, code: int, text: str):
@@ -497,7 +498,7 @@ def node_config(figure, node: int, watchdog_ticks: int = 5, seq: int = 0) -> Con
                                       _clip(abs(a.scale) * a.max_speed, 1, 2**32 - 1),
                                       _clip(abs(a.scale) * a.max_accel, 1, 2**32 - 1)))
     if not channels:
-        raise ValueError(f"figure {figure.name!r} has no axis on node {node}")
+        raise ArgumentError(f"figure {figure.name!r} has no axis on node {node}")
     return Config(node, tuple(channels), watchdog_ticks, round(figure.tick_period * 1e6), seq)
 
 

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from marionette.errors import ArgumentError, MarionetteError
+
 MAGIC = b"MARIONETTE-FLIGHT 1 "
 
 
@@ -26,6 +28,7 @@ class FlightRecorder:
         self.count = 0                     # records kept [ticks]
         self._chunks: list[np.ndarray] = []
         self._file = None
+        self.error: str | None = None      # why the file could not be written (then kept no more)
         # called with each batch of records as it is added (on the drain thread)
         self.listeners: list = []
         if self.path is not None:
@@ -40,16 +43,24 @@ class FlightRecorder:
         self.count += len(records)
         for listen in self.listeners:
             listen(records)
-        if self._file is not None:
-            self._file.write(records.tobytes())
-        else:
+        if self.path is None:
             self._chunks.append(records.copy())
+        elif self._file is not None:
+            try:
+                self._file.write(records.tobytes())
+            except OSError as exc:         # a full disk: said when the records are asked for
+                self._failed(exc)
 
     def records(self) -> np.ndarray:
         """All records so far (from memory, or re-read from the file)."""
         if self.path is not None:
             if self._file is not None:
-                self._file.flush()
+                try:
+                    self._file.flush()
+                except OSError as exc:
+                    self._failed(exc)
+            if self.error is not None:
+                raise MarionetteError(self.error)
             return read_flight_record(self.path)[1]
         if not self._chunks:
             return np.empty(0, dtype=self.dtype)
@@ -57,8 +68,20 @@ class FlightRecorder:
 
     def close(self) -> None:
         if self._file is not None:
-            self._file.close()
+            try:
+                self._file.close()
+            except OSError as exc:
+                self._failed(exc)
             self._file = None
+
+    def _failed(self, exc: OSError) -> None:
+        if self.error is None:
+            self.error = f"{self.path}: cannot write the flight record: {exc.strerror or exc}"
+        try:
+            self._file.close()
+        except (OSError, AttributeError):
+            pass
+        self._file = None
 
     def __del__(self):
         self.close()
@@ -70,11 +93,11 @@ def read_flight_record(path: str | Path) -> tuple[dict, np.ndarray]:
     with open(path, "rb") as f:
         line = f.readline()
         if not line.startswith(MAGIC):
-            raise ValueError(f"{path}: not a marionette flight record (bad first line)")
+            raise ArgumentError(f"{path}: not a marionette flight record (bad first line)")
         meta = json.loads(line[len(MAGIC):])
         dtype = record_dtype(len(meta["axis_names"]))
         raw = f.read()
     if len(raw) % dtype.itemsize:
-        raise ValueError(f"{path}: {len(raw)} bytes of records is not a whole number of "
-                         f"{dtype.itemsize}-byte records (file cut short?)")
+        raise ArgumentError(f"{path}: {len(raw)} bytes of records is not a whole number of "
+                            f"{dtype.itemsize}-byte records (file cut short?)")
     return meta, np.frombuffer(raw, dtype=dtype)

@@ -19,7 +19,7 @@ import numpy as np
 
 from marionette import _shape
 from marionette.config import FigureConfig
-from marionette.errors import ShowError
+from marionette.errors import ArgumentError, ShowError
 from marionette.show import Show, fit_to_figure
 
 POLICIES = ("reduce", "borrow", "reject")
@@ -128,16 +128,16 @@ def _per_axis(value, config: FigureConfig, default_fraction: float, what: str,
         else:
             v = value
         if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)):
-            raise ValueError(f"{what} for axis {a.name!r} is {v!r}, not a number")
+            raise ArgumentError(f"{what} for axis {a.name!r} is {v!r}, not a number")
         v = float(v)
         if not math.isfinite(v) or v < 0 or (positive and v == 0):
-            raise ValueError(f"{what} for axis {a.name!r} must be a finite number "
-                             f"{'> 0' if positive else '>= 0'}, not {v!r}")
+            raise ArgumentError(f"{what} for axis {a.name!r} must be a finite number "
+                                f"{'> 0' if positive else '>= 0'}, not {v!r}")
         out.append(v)
     if isinstance(value, Mapping):
         unknown = set(value) - set(config.axis_names)
         if unknown:
-            raise ValueError(f"{what}: unknown axis {sorted(unknown)[0]!r}")
+            raise ArgumentError(f"{what}: unknown axis {sorted(unknown)[0]!r}")
     return out
 
 
@@ -183,9 +183,9 @@ def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
     Returns the shaped show (axes in the figure's order) and the report.
     """
     if policy not in POLICIES:
-        raise ValueError(f"policy must be one of {POLICIES}, not {policy!r}")
+        raise ArgumentError(f"policy must be one of {POLICIES}, not {policy!r}")
     if not (isinstance(accel_fraction, (int, float)) and 0 < accel_fraction <= 1):
-        raise ValueError(f"accel_fraction must be in (0, 1], not {accel_fraction!r}")
+        raise ArgumentError(f"accel_fraction must be in (0, 1], not {accel_fraction!r}")
     show = fit_to_figure(show, config)
     proms = _per_axis(prominence, config, DEFAULT_PROMINENCE, "prominence", positive=True)
     tols = _per_axis(rest_tolerance, config, DEFAULT_REST_TOLERANCE, "rest_tolerance",
@@ -219,7 +219,7 @@ def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
             max_speed=a.max_speed, max_accel=a.max_accel, plan_speed=vmax, plan_accel=amax,
             points=points, moves=moves))
     report = ShapeReport(policy=policy, show=show.path, figure=config.name, axes=axes,
-                         accel_fraction=accel_fraction, lag_headroom=lag_headroom)
+                            accel_fraction=accel_fraction, lag_headroom=lag_headroom)
     bad = report.infeasible
     if policy == "reject" and bad:
         raise ShowError(f"{show.path}: {len(bad)} move(s) exceed the servo limits of "

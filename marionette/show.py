@@ -6,6 +6,7 @@ both formats are described in docs/formats.md.
 from __future__ import annotations
 
 import csv
+import io
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -13,9 +14,12 @@ from pathlib import Path
 import numpy as np
 
 from marionette.config import UNITS, FigureConfig
-from marionette.errors import ShowError
+from marionette.errors import ArgumentError, ShowError
+from marionette.npzfile import read_npz
+from marionette.textfile import read_text
 
 CSV_MAGIC = "# marionette show 1"
+MIN_COMPRESS_GAIN = 0.5         # on_limits="compress" below this gain flattens the dance: refused [1]
 ONSET_COLUMN = "onset_db"       # optional CSV column after loudness: the stored onset strength [dB]
 LIMIT_POLICIES = ("error", "clamp", "compress")
 
@@ -101,41 +105,40 @@ def _read_csv(path: Path) -> Show:
     header: list[str] | None = None
     rows: list[list[float]] = []
     first_line = 0
-    with open(path, newline="") as f:
-        for line_no, line in enumerate(f, start=1):
-            text = line.strip()
-            if not text:
-                continue
-            if text.startswith("#"):
-                if line_no == 1 and text != CSV_MAGIC:
-                    raise ShowError(f"{path}, line 1: expected {CSV_MAGIC!r}, found {text!r}")
-                if ":" in text and header is None:
-                    key, _, value = text[1:].partition(":")
-                    meta[key.strip()] = value.strip()
-                continue
-            cells = next(csv.reader([text]))
-            if header is None:
-                if line_no == 1:
-                    raise ShowError(f"{path}, line 1: expected {CSV_MAGIC!r}")
-                header = [c.strip() for c in cells]
-                with_onsets = len(header) > 2 and header[2] == ONSET_COLUMN
-                if header[:2] != ["tick", "loudness"] or len(header) < 3 + with_onsets:
-                    raise ShowError(f"{path}, line {line_no}: header must be "
-                                    f"'tick,loudness,[{ONSET_COLUMN},]<axis>,...', found {text!r}")
-                dup = {h for h in header if header.count(h) > 1}
-                if dup:
-                    raise ShowError(f"{path}, line {line_no}: duplicate column(s) {sorted(dup)}")
-                continue
-            if len(cells) != len(header):
-                raise ShowError(f"{path}, line {line_no}: {len(cells)} values, "
-                                f"the header has {len(header)} columns")
-            tick = cells[0].strip()
-            if tick != str(len(rows)):
-                raise ShowError(f"{path}, line {line_no}: tick {tick!r}, expected {len(rows)} "
-                                "(ticks must count up from 0 without gaps)")
-            if not rows:
-                first_line = line_no
-            rows.append([_parse_float(path, line_no, header[i], c) for i, c in enumerate(cells[1:], 1)])
+    for line_no, line in enumerate(io.StringIO(read_text(path, ShowError), newline=""), start=1):
+        text = line.strip()
+        if not text:
+            continue
+        if text.startswith("#"):
+            if line_no == 1 and text != CSV_MAGIC:
+                raise ShowError(f"{path}, line 1: expected {CSV_MAGIC!r}, found {text!r}")
+            if ":" in text and header is None:
+                key, _, value = text[1:].partition(":")
+                meta[key.strip()] = value.strip()
+            continue
+        cells = next(csv.reader([text]))
+        if header is None:
+            if line_no == 1:
+                raise ShowError(f"{path}, line 1: expected {CSV_MAGIC!r}")
+            header = [c.strip() for c in cells]
+            with_onsets = len(header) > 2 and header[2] == ONSET_COLUMN
+            if header[:2] != ["tick", "loudness"] or len(header) < 3 + with_onsets:
+                raise ShowError(f"{path}, line {line_no}: header must be "
+                                f"'tick,loudness,[{ONSET_COLUMN},]<axis>,...', found {text!r}")
+            dup = {h for h in header if header.count(h) > 1}
+            if dup:
+                raise ShowError(f"{path}, line {line_no}: duplicate column(s) {sorted(dup)}")
+            continue
+        if len(cells) != len(header):
+            raise ShowError(f"{path}, line {line_no}: {len(cells)} values, "
+                            f"the header has {len(header)} columns")
+        tick = cells[0].strip()
+        if tick != str(len(rows)):
+            raise ShowError(f"{path}, line {line_no}: tick {tick!r}, expected {len(rows)} "
+                            "(ticks must count up from 0 without gaps)")
+        if not rows:
+            first_line = line_no
+        rows.append([_parse_float(path, line_no, header[i], c) for i, c in enumerate(cells[1:], 1)])
     if header is None or not rows:
         raise ShowError(f"{path}: no data rows")
     data = np.array(rows, dtype=np.float64)
@@ -154,25 +157,30 @@ def _read_csv(path: Path) -> Show:
 
 
 def _read_npz(path: Path) -> Show:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            missing = {"positions", "loudness", "axis_names"} - set(z.files)
-            if missing:
-                raise ShowError(f"{path}: missing array(s) {sorted(missing)}")
-            positions = np.array(z["positions"], dtype=np.float64)
-            names = [str(n) for n in z["axis_names"]]
-            units = [str(u) for u in z["units"]] if "units" in z.files else ["m"] * len(names)
-            return Show(axis_names=names, units=units, positions=positions,
-                        loudness=np.array(z["loudness"], dtype=np.float64),
-                        tick_period=float(z["tick_period"]) if "tick_period" in z.files else 0.02,
-                        source=str(z["source"]) if "source" in z.files else "",
-                        music=str(z["music"]) if "music" in z.files else "", path=str(path),
-                        onsets=np.array(z["onsets"], dtype=np.float64) if "onsets" in z.files else None,
-                        bands=np.array(z["bands"], dtype=np.float64) if "bands" in z.files else None)
-    except (OSError, ValueError) as exc:
-        if isinstance(exc, ShowError):
-            raise
-        raise ShowError(f"{path}: not a readable NPZ show: {exc}") from None
+    z = read_npz(path, ShowError)
+    missing = {"positions", "loudness", "axis_names"} - set(z)
+    if missing:
+        raise ShowError(f"{path}: missing array(s) {sorted(missing)}")
+
+    def numbers(name):
+        try:
+            return np.array(z[name], dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ShowError(f"{path}: array {name!r} ({z[name].dtype}) is not numbers") from None
+
+    def text(name, default=""):
+        return str(z[name]) if name in z else default
+
+    names = [str(n) for n in np.atleast_1d(z["axis_names"])]
+    units = [str(u) for u in np.atleast_1d(z["units"])] if "units" in z else ["m"] * len(names)
+    period = numbers("tick_period") if "tick_period" in z else np.float64(0.02)
+    if period.size != 1:
+        raise ShowError(f"{path}: tick_period has {period.size} values, expected one")
+    return Show(axis_names=names, units=units, positions=numbers("positions"),
+                loudness=numbers("loudness"), tick_period=float(period.reshape(())),
+                source=text("source"), music=text("music"), path=str(path),
+                onsets=numbers("onsets") if "onsets" in z else None,
+                bands=numbers("bands") if "bands" in z else None)
 
 
 def validate(show: Show) -> None:
@@ -185,7 +193,9 @@ def validate(show: Show) -> None:
         raise ShowError(f"{show.path}: loudness has shape {show.loudness.shape}, "
                         f"expected ({p.shape[1]},)")
     if len(show.units) != len(show.axis_names):
-        raise ShowError(f"{show.path}: {len(show.units)} units for {len(show.axis_names)} axes")
+        raise ShowError(f"{show.path}: {len(show.units)} units ({', '.join(show.units)}) for "
+                        f"{len(show.axis_names)} axes ({', '.join(show.axis_names)}): a column "
+                        "missing, or a unit too many?")
     for name, unit in zip(show.axis_names, show.units):
         if unit not in UNITS:
             raise ShowError(f"{show.path}: axis {name!r} has unknown unit {unit!r} (use one of {UNITS})")
@@ -218,6 +228,19 @@ def validate(show: Show) -> None:
             raise ShowError(f"{show.locate(k)}: band {j} loudness {float(b[k, j])!r} must be finite and >= 0")
 
 
+def check_axes(show: Show, config: FigureConfig) -> None:
+    """The show has a trajectory for every axis of the figure, and no other."""
+    figure_names = config.axis_names
+    unknown = [n for n in show.axis_names if n not in figure_names]
+    if unknown:
+        raise ShowError(f"{show.path}: unknown axis {unknown[0]!r} (not in {config.source}; "
+                        f"known: {', '.join(figure_names)})")
+    missing = [n for n in figure_names if n not in show.axis_names]
+    if missing:
+        raise ShowError(f"{show.path}: no trajectory (column) for axis {missing[0]!r} of "
+                        f"{config.source}")
+
+
 def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") -> Show:
     """The show with its axes in the figure's order, checked against the figure.
 
@@ -227,20 +250,13 @@ def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") ->
     the returned show's ``changes``.
     """
     if on_limits not in LIMIT_POLICIES:
-        raise ValueError(f"on_limits must be one of {LIMIT_POLICIES}, not {on_limits!r}")
+        raise ArgumentError(f"on_limits must be one of {LIMIT_POLICIES}, not {on_limits!r}")
     if not math.isclose(show.tick_period, config.tick_period, rel_tol=1e-9):
         raise ShowError(f"{show.path}: tick_period {show.tick_period!r} s does not match "
                         f"{config.source}: {config.tick_period!r} s")
+    check_axes(show, config)
     figure_names = config.axis_names
     row_of = {name: j for j, name in enumerate(show.axis_names)}
-    known = set(figure_names)
-    unknown = [n for n in show.axis_names if n not in known]
-    if unknown:
-        raise ShowError(f"{show.path}: unknown axis {unknown[0]!r} (not in {config.source}; "
-                        f"known: {', '.join(figure_names)})")
-    missing = [n for n in figure_names if n not in row_of]
-    if missing:
-        raise ShowError(f"{show.path}: no trajectory for axis {missing[0]!r} of {config.source}")
     order = [row_of[n] for n in figure_names]
     positions = show.positions[order].copy()
     changes = list(show.changes)
@@ -266,6 +282,13 @@ def fit_to_figure(show: Show, config: FigureConfig, on_limits: str = "error") ->
         else:
             lo, hi = min(float(x.min()), axis.min), max(float(x.max()), axis.max)
             gain = (axis.max - axis.min) / (hi - lo)
+            if gain < MIN_COMPRESS_GAIN:
+                k = int(np.argmax(np.maximum(x - axis.max, axis.min - x)))      # farthest out
+                raise ShowError(f"{show.locate(k)}: axis {axis.name!r} position {float(x[k])!r} "
+                                f"{axis.unit} would compress the axis's range [{lo:.6g}, {hi:.6g}] "
+                                f"into [{axis.min!r}, {axis.max!r}] by a gain of {gain:.3g}, under "
+                                f"{MIN_COMPRESS_GAIN:g}: the dance would be flattened (an outlier? "
+                                "on_limits='clamp' cuts it instead)")
             positions[j] = np.clip(axis.min + (x - lo) * gain, axis.min, axis.max)
             changes.append(f"axis {axis.name!r}: compressed range [{lo:.6g}, {hi:.6g}] into "
                            f"[{axis.min!r}, {axis.max!r}] {axis.unit} (gain {gain:.6g})")
@@ -285,5 +308,7 @@ def load_show(path: str | Path, config: FigureConfig | None = None,
         show = _read_npz(path)
     else:
         raise ShowError(f"{path}: unknown show format {path.suffix!r} (use .csv or .npz)")
+    if config is not None:          # a missing column named before the counts disagree
+        check_axes(show, config)
     validate(show)
     return fit_to_figure(show, config, on_limits) if config is not None else show

@@ -22,11 +22,11 @@ FEATURES = ["loudness"] + [f"bands{n}" for n in bench.BAND_COUNTS]
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
-    return bench.run(quick=True)
+    return bench.collect(quick=True)
 
 
 def test_quick_run_through_the_command_has_the_documented_keys(capsys, monkeypatch, quick):
-    monkeypatch.setattr(bench, "run", lambda **kw: quick)        # the run itself: the fixture's
+    monkeypatch.setattr(bench, "collect", lambda **kw: quick)    # the runs themselves: the fixture's
     assert main(["bench", "bands", "--quick", "--json"]) == 0
     rows = json.loads(capsys.readouterr().out)
     identify = [r for r in rows if r["section"] == "identify"]

@@ -20,7 +20,7 @@ def run_cli(*args):
 
 @pytest.fixture(scope="module")
 def report():
-    return fuzz.run(FRAMES, seed=fuzz.SEED)
+    return fuzz.collect(FRAMES, seed=fuzz.SEED)
 
 
 def test_short_run_reports_every_field(report):
@@ -51,11 +51,11 @@ def test_accepted_corrupt_within_the_binomial_bound(report):
 
 
 def test_same_seed_same_report(report):
-    again = fuzz.run(FRAMES, seed=fuzz.SEED)
+    again = fuzz.collect(FRAMES, seed=fuzz.SEED)
     skip = {"seconds", "frames_per_s", "wire_mb_per_s", "machine"}
     assert {k: v for k, v in again.items() if k not in skip} == \
         {k: v for k, v in report.items() if k not in skip}
-    other = fuzz.run(2000, seed=1)
+    other = fuzz.collect(2000, seed=1)
     assert other["garbage_bytes"] != report["garbage_bytes"]
 
 

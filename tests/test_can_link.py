@@ -78,3 +78,17 @@ def test_open_link_refuses_bad_descriptions():
             assert spec in str(exc) or "serial" in str(exc)
         else:
             raise AssertionError(f"{spec} was accepted")
+
+
+def test_a_can_link_that_cannot_open_is_told_in_plain_words(tmp_path):
+    missing = tmp_path / "no-adapter"
+    for spec, said in [(f"can:slcan:{missing}@500000", "No such file"),
+                       ("can:no_such_interface:x", "no_such_interface")]:
+        try:
+            open_link(spec)
+        except LinkError as exc:
+            assert str(exc).startswith(f"CAN link {spec}: ") and said in str(exc)
+            assert "{" not in str(exc)               # not a Python dict of bus arguments
+        else:
+            raise AssertionError(f"{spec} was accepted")
+

@@ -9,7 +9,7 @@ import pytest
 
 from conftest import run_cli
 from marionette import _core
-from marionette.cmd_log import FLAGS, limited_by_axis
+from marionette.cli.log import FLAGS, limited_by_axis
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.music.feature import wav_frames
@@ -200,6 +200,6 @@ def test_bad_files_are_errors_that_name_the_file(step_record, tmp_path):
         assert not (tmp_path / "out.csv").exists()
     assert "not a whole number" in run_cli("log", tmp_path / "truncated.bin").stderr
     result = run_cli("log", tmp_path / "missing.bin")
-    assert result.returncode == 2 and "missing.bin: no such flight record" in result.stderr
+    assert result.returncode == 2 and "argument record: " in result.stderr and "missing.bin: no such file" in result.stderr
     result = run_cli("log", step_record, "--plot", tmp_path / "x.png", "--axes", "x,nose")
     assert result.returncode == 2 and "no axis 'nose'" in result.stderr

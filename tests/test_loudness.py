@@ -11,6 +11,7 @@ no module at all.
 """
 from __future__ import annotations
 
+import struct
 import sys
 import types
 
@@ -169,6 +170,44 @@ def test_wav_round_trip_and_errors(tmp_path):
     (tmp_path / "junk.wav").write_bytes(b"not a wav file")
     with pytest.raises(AudioError, match="junk.wav"):
         read_wav(tmp_path / "junk.wav")
+
+
+def _riff(fmt: bytes, data: bytes) -> bytes:
+    body = b"WAVE" + b"fmt " + struct.pack("<I", len(fmt)) + fmt + b"data" + struct.pack("<I", len(data)) + data
+    return b"RIFF" + struct.pack("<I", len(body)) + body
+
+
+def test_24_bit_wave_format_extensible_is_read(tmp_path):
+    """What most 24-bit recorders write: tag 0xFFFE, sub-format PCM; stereo."""
+    rate = 16000
+    x = 0.5 * np.sin(2 * np.pi * 440 * np.arange(rate) / rate)
+    pcm = np.round(np.stack([x, -0.25 * x], axis=1) * (2**23 - 1)).astype("<i4")
+    data = pcm.view(np.uint8).reshape(-1, 4)[:, :3].tobytes()          # little-endian 24 bit
+    pcm_guid = struct.pack("<HHI", 1, 0, 0x00100000) + bytes.fromhex("800000aa00389b71")
+    fmt = struct.pack("<HHIIHHHHI", 0xFFFE, 2, rate, rate * 6, 6, 24, 22, 24, 3) + pcm_guid
+    path = tmp_path / "24bit.wav"
+    path.write_bytes(_riff(fmt, data))
+    y, fs = read_wav(path)
+    assert fs == rate and y.shape == (rate, 2)
+    assert np.max(np.abs(y[:, 0] - x)) < 2.0 ** -22 and np.max(np.abs(y[:, 1] + 0.25 * x)) < 2.0 ** -22
+    path.write_bytes(_riff(fmt, data)[:-1000])          # cut short: the whole frames it holds
+    assert read_wav(path)[0].shape == (rate - 167, 2)
+    float_fmt = struct.pack("<HHIIHH", 3, 1, rate, rate * 4, 4, 32)
+    path.write_bytes(_riff(float_fmt, x.astype("<f4").tobytes()))
+    assert np.max(np.abs(read_wav(path)[0] - x)) < 1e-7
+
+
+@pytest.mark.parametrize("content, said", [
+    (b"", "empty file, not a WAV file"),
+    (b"RIFF\x04\x00\x00\x00WAVE", "without a whole fmt chunk"),
+    (_riff(struct.pack("<HHIIHH", 1, 1, 8000, 16000, 2, 16), b"")[:-8], "without a data chunk"),
+    (_riff(struct.pack("<HHIIHH", 1, 0, 8000, 16000, 2, 16), b"\0\0"), "0 channels")])
+def test_a_bad_wav_is_an_error_naming_the_file(content, said, tmp_path):
+    path = tmp_path / "bad.wav"
+    path.write_bytes(content)
+    with pytest.raises(AudioError) as info:
+        read_wav(path)
+    assert str(info.value).startswith(str(path)) and said in str(info.value)
 
 
 def test_follower_ignores_the_volume_knob():

@@ -6,7 +6,7 @@ import pytest
 
 from conftest import run_cli
 from marionette._core import FLAG_END
-from marionette.cmd_sync_sim import simulate
+from marionette.cli.sync_sim import simulate
 from marionette.config import load_config
 from marionette.music.feature import read_wav, wav_frames, write_wav
 from marionette.recorder import read_flight_record

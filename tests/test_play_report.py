@@ -218,7 +218,7 @@ def test_the_latency_the_follower_uses():
     d["follow"] = {"latency": 0.05}
     follow = config_from_dict(d, "f.toml").follow
     assert follow.latency == 0.05 and c_options(follow, 0.02)["latency"] == 0.05
-    # what cmd_play builds the engine with when the sound card reports 40 ms
+    # what play.run builds the engine with when the sound card reports 40 ms
     chosen, _ = choose_latency(None, 0.040)
     follow = dataclasses.replace(config_from_dict(figure_dict(), "f.toml").follow, latency=chosen)
     assert c_options(follow, 0.02)["latency"] == 0.040

@@ -85,7 +85,7 @@ def test_bad_onset_column_names_line_and_value(tmp_path, header, body, expected)
 def test_unknown_missing_axis_and_wrong_period(tmp_path):
     with pytest.raises(ShowError, match="unknown axis 'elbow'"):
         load_show(_csv(tmp_path, "0,0,0,0\n", header="tick,loudness,a0,elbow"), make_figure(2))
-    with pytest.raises(ShowError, match="no trajectory for axis 'a1'"):
+    with pytest.raises(ShowError, match=r"no trajectory \(column\) for axis 'a1'"):
         load_show(_csv(tmp_path, "0,0,0\n", header="tick,loudness,a0"), make_figure(2))
     with pytest.raises(ShowError, match=r"tick_period 0.04 s does not match test.toml: 0.02 s"):
         load_show(_csv(tmp_path, "0,0,0,0\n", meta="# tick_period: 0.04\n"), make_figure(2))
@@ -129,7 +129,7 @@ def test_npz_errors(tmp_path):
     with pytest.raises(ShowError, match="bad.npz: missing array"):
         load_show(path)
     path.write_bytes(b"not a zip")
-    with pytest.raises(ShowError, match="bad.npz: not a readable NPZ"):
+    with pytest.raises(ShowError, match="bad.npz: not an .npz file"):
         load_show(path)
     config = make_figure(2)
     show = make_show(config, smooth_dance(config, 10, np.random.default_rng(1)))
@@ -147,3 +147,61 @@ def test_npz_errors(tmp_path):
     show.save(tmp_path / "short.npz")
     with pytest.raises(ShowError, match=r"short.npz: bands have shape \(9, 6\), expected \(10 ticks"):
         load_show(tmp_path / "short.npz")
+
+
+def test_a_damaged_npz_is_one_error_naming_the_file_and_no_pickle_advice(tmp_path):
+    """Empty, truncated at random points, bytes overwritten at random (fixed
+    seed): always a ShowError that names the file; never numpy's advice to
+    allow pickles."""
+    config = make_figure(2)
+    good = tmp_path / "good.npz"
+    make_show(config, smooth_dance(config, 200, np.random.default_rng(2))).save(good)
+    data = good.read_bytes()
+    rng = np.random.default_rng(20261202)
+    path = tmp_path / "damaged.npz"
+    cases = [b""] + [data[:rng.integers(0, len(data))] for _ in range(40)]
+    for _ in range(40):
+        d = bytearray(data)
+        for k in rng.integers(0, len(d), size=rng.integers(1, 30)):
+            d[k] = rng.integers(0, 256)
+        cases.append(bytes(d))
+    refused = 0
+    for case in cases:
+        path.write_bytes(case)
+        try:
+            load_show(path, config)
+        except ShowError as exc:
+            refused += 1
+            assert str(exc).startswith(str(path)) and "pickle" not in str(exc)
+    assert refused >= 75                # a few overwritten bytes may fall in padding
+
+
+def test_compress_refuses_to_flatten_an_axis_for_one_outlier(tmp_path):
+    """One 1e300 among a good dance: not a gain of 1e-300 for the whole axis,
+    but an error naming the tick and the value."""
+    config = make_figure(2)
+    positions = smooth_dance(config, 50, np.random.default_rng(3))
+    positions[1, 17] = 1e300
+    path = tmp_path / "outlier.npz"
+    make_show(config, positions).save(path)
+    with pytest.raises(ShowError) as info:
+        load_show(path, config, on_limits="compress")
+    for part in ["tick 17", "'a1'", "1e+300", "gain of 2e-300", "under 0.5", "clamp"]:
+        assert part in str(info.value), part
+    positions[1, 17] = 1.2                          # a little outside: compressed as before
+    make_show(config, positions).save(path)
+    assert "gain" in load_show(path, config, on_limits="compress").changes[0]
+
+
+def test_a_csv_missing_a_column_names_the_axis(tmp_path):
+    config = make_figure(3)
+    path = tmp_path / "cut.csv"
+    make_show(config, smooth_dance(config, 5, np.random.default_rng(4))).save(path)
+    lines = path.read_text().splitlines()
+    cut = [",".join(line.split(",")[:-1]) if not line.startswith("#") else line for line in lines]
+    path.write_text("\n".join(cut) + "\n")           # the last column gone, its unit left
+    with pytest.raises(ShowError, match=r"cut.csv: no trajectory \(column\) for axis 'a2'"):
+        load_show(path, config)
+    with pytest.raises(ShowError, match=r"3 units \(m, m, m\) for 2 axes \(a0, a1\)"):
+        load_show(path)
+

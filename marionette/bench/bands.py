@@ -32,7 +32,6 @@ and whether it locks on the wrong-cue decks.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import zlib
@@ -42,6 +41,7 @@ import numpy as np
 from marionette.bench import bands_cue
 from marionette.bench._machine import describe, machine_info
 from marionette.bench.sync import PIECES, SEED, SEEDS, scenarios
+from marionette.cli.options import Number
 from marionette.music.bands import bands
 from marionette.music.feature import FRAME_PERIOD, loudness
 from marionette.sim.music import synthesize
@@ -125,7 +125,7 @@ def measure_deck(stored_db: np.ndarray, live_db: np.ndarray, truth: np.ndarray, 
     return out
 
 
-def run(seeds: int = SEEDS, seed: int = SEED, quick: bool = False, progress=None) -> list[dict]:
+def collect(seeds: int = SEEDS, seed: int = SEED, quick: bool = False, progress=None) -> list[dict]:
     """One result per (feature, window length) with the documented keys."""
     features = {"loudness": lambda x, fs: loudness(x, fs)}
     for n in BAND_COUNTS:
@@ -195,15 +195,28 @@ def format_table(results: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="marionette bench bands", description=__doc__.split("\n\n")[0])
-    ap.add_argument("--json", action="store_true", help="print a JSON list, one object per feature and window")
-    ap.add_argument("--seeds", type=int, default=SEEDS, metavar="N", help=f"sets of scenarios (default {SEEDS})")
-    ap.add_argument("--quick", action="store_true", help="one piece, one seed, 30 s decks (smoke test)")
-    args = ap.parse_args(argv)
-    if args.seeds < 1:
-        ap.error(f"--seeds {args.seeds}: give 1 or more")
-    results = run(seeds=args.seeds, quick=args.quick,
-                  progress=None if args.json else (lambda m: print(m, file=sys.stderr, flush=True)))
+def register(sub) -> None:
+    parser = sub.add_parser("bands", help="what 0.5-2 s of live music tells apart: loudness against bands",
+                            description=__doc__.split("\n\n")[0])
+    parser.add_argument("--json", action="store_true",
+                        help="print a JSON list, one object per feature and window, then per feature and rule")
+    parser.add_argument("--seeds", type=Number(int, 1), default=SEEDS, metavar="N",
+                        help=f"sets of scenarios (default {SEEDS})")
+    parser.add_argument("--quick", action="store_true", help="one piece, one seed, 30 s decks (smoke test)")
+
+
+def run(args) -> int:
+    progress = None if args.json else (lambda msg: print(f"  {msg}", file=sys.stderr, flush=True))
+    results = collect(seeds=args.seeds, quick=args.quick, progress=progress)
     print(json.dumps(results, indent=1) if args.json else format_table(results))
-    return 0
+    return 0           # no targets: a measurement for choosing the feature
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.bands``: as ``marionette bench bands``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "bands", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -40,7 +40,9 @@ import subprocess
 import sys
 import tempfile
 
+from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import Number
 
 DEFAULT_FRAMES = 1_000_000
 SEED = 20261122
@@ -100,7 +102,7 @@ def evaluate(report: dict) -> dict:
     return report
 
 
-def run(frames: int = DEFAULT_FRAMES, seed: int = SEED) -> dict:
+def collect(frames: int = DEFAULT_FRAMES, seed: int = SEED) -> dict:
     """The fuzz in a child process; its report, evaluated."""
     failed = {"crashed": False, "hung": False}
     try:
@@ -163,33 +165,41 @@ def format_report(r: dict) -> str:
         "checks:",
     ]
     for name, ok in r["checks"].items():
-        lines.append(f"  {name:<45} {'PASS' if ok else 'FAIL'}")
+        lines.append(f"  {name:<45} {verdict(ok)}")
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="marionette bench fuzz",
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "fuzz", help="random and mutated frames through the protocol decoder",
         description="Random and mutated frames through the C protocol decoder and deframer: "
                     "no crash, no hang, frames/s, corrupt frames accepted against the CRC's odds.")
-    parser.add_argument("--frames", type=int, default=DEFAULT_FRAMES,
+    parser.add_argument("--frames", type=Number(int, 1), default=DEFAULT_FRAMES,
                         help=f"serial frames (default {DEFAULT_FRAMES}; CAN frames: about a quarter more)")
-    parser.add_argument("--seed", type=int, default=SEED, help="seed of the fuzzer")
+    parser.add_argument("--seed", type=Number(int, 0, 2**64 - 1), default=SEED,
+                        help="seed of the fuzzer")
     parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
     parser.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.frames < 1 or not 0 <= args.seed < 2**64:
-        parser.error("--frames must be >= 1 and --seed 0 .. 2^64-1")
+
+
+def run(args) -> int:
     if args.worker:
         _worker(args.seed, args.frames)
         return 0
-    report = run(args.frames, args.seed)
+    report = collect(args.frames, args.seed)
     if args.json:
         json.dump(report, sys.stdout, indent=2)
         sys.stdout.write("\n")
     else:
         print(format_report(report))
-    return 0 if report["passed"] else 1
+    return exit_status(report["checks"].values(), args.strict)
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.fuzz``: as ``marionette bench fuzz``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "fuzz", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

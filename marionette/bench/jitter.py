@@ -36,9 +36,9 @@ printed (and is in the JSON as "gil_p99_change_us").
 """
 from __future__ import annotations
 
-import argparse
 import json
 import math
+import os
 import re
 import shutil
 import subprocess
@@ -48,10 +48,13 @@ import warnings
 
 import numpy as np
 
+from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import Number
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
+from marionette.errors import MarionetteError
 from marionette.show import load_show
 
 PRIORITY = 80             # SCHED_FIFO priority of the tick thread and of cyclictest [1..99]
@@ -99,7 +102,7 @@ def _engine_run(ticks: int, priority: int, lock_memory: bool, churn: int = 0,
                                   max_ticks=ticks)
         period = config.tick_period               # [s]
         if not engine.wait(timeout=ticks * period + 30.0):
-            raise RuntimeError("the real-time loop did not finish its ticks in time")
+            raise MarionetteError("the real-time loop did not finish its ticks in time")
         stats = engine.stats()
         histogram = engine.histogram("wake")
     finally:
@@ -132,8 +135,8 @@ def _cyclictest_run(ticks: int, period: float, priority: int, lock_memory: bool,
         + ([] if cpu is None else ["-a", str(cpu)])
     done = subprocess.run(cmd, capture_output=True, text=True, timeout=ticks * period + 60.0)
     if done.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed with status {done.returncode}: "
-                           f"{done.stderr.strip() or done.stdout.strip()}")
+        raise MarionetteError(f"{' '.join(cmd)} failed with status {done.returncode}: "
+                              f"{done.stderr.strip() or done.stdout.strip()}")
     samples, summary = [], None
     for line in done.stdout.splitlines():
         m = _SAMPLE.match(line)
@@ -143,7 +146,7 @@ def _cyclictest_run(ticks: int, period: float, priority: int, lock_memory: bool,
             summary = {"count": int(m.group(1)), "min_ns": int(m.group(2)),
                        "avg_ns": int(m.group(3)), "max_ns": int(m.group(4))}
     if not samples:
-        raise RuntimeError(f"{' '.join(cmd)} printed no latencies:\n{done.stdout[-2000:]}")
+        raise MarionetteError(f"{' '.join(cmd)} printed no latencies:\n{done.stdout[-2000:]}")
     ns = np.sort(np.array(samples, dtype=np.int64))          # [ns]
     peak = max(float(ns[-1]), float(summary["max_ns"]) if summary else 0.0)
     return {
@@ -212,9 +215,9 @@ def check_targets(result: dict) -> list[tuple[str, str, bool | None]]:
     return out
 
 
-def run(seconds: float = SECONDS, priority: int = PRIORITY, lock_memory: bool = True,
-        cyclictest: str | None = "cyclictest", churn_threads: int = CHURN_THREADS,
-        cpu: int | None = None, rounds: int = ROUNDS) -> dict:
+def collect(seconds: float = SECONDS, priority: int = PRIORITY, lock_memory: bool = True,
+            cyclictest: str | None = "cyclictest", churn_threads: int = CHURN_THREADS,
+            cpu: int | None = None, rounds: int = ROUNDS) -> dict:
     """The three kinds of run (see the module docstring), seconds [s] each
     in all, interleaved in rounds; cpu pins the tick thread and cyclictest
     to that CPU (None: not pinned)."""
@@ -291,37 +294,34 @@ def format_table(result: dict) -> str:
                      "an effect of idle states, not of the GIL")
     lines.append("targets:")
     for label, measured, ok in check_targets(result):
-        verdict = "SKIP" if ok is None else "PASS" if ok else "FAIL"
-        lines.append(f"  {label:<40} {measured:<36} {verdict}")
+        lines.append(f"  {label:<40} {measured:<36} {verdict(ok)}")
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="marionette bench jitter",
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "jitter", help="wake latency of the real-time loop, beside cyclictest",
         description="Wake latency [us] of the real-time loop, beside cyclictest at the same "
                     "period and priority, and under Python threads loading the GIL.")
-    parser.add_argument("--seconds", type=float, default=SECONDS, metavar="N",
+    parser.add_argument("--seconds", type=Number(float, 0.0, above=True), default=SECONDS, metavar="N",
                         help=f"length of each of the three runs [s] (default {SECONDS:g})")
-    parser.add_argument("--priority", type=int, default=PRIORITY, metavar="P",
-                        help=f"SCHED_FIFO priority 1..99 (default {PRIORITY})")
+    parser.add_argument("--priority", type=Number(int, 1, 99), default=PRIORITY, metavar="P",
+                        help=f"SCHED_FIFO priority (default {PRIORITY})")
     parser.add_argument("--no-mlock", action="store_true",
                         help="do not lock memory (engine lock_memory, cyclictest -m)")
-    parser.add_argument("--cpu", type=int, default=None, metavar="N",
+    parser.add_argument("--cpu", type=Number(int, 0, (os.cpu_count() or 1) - 1), default=None, metavar="N",
                         help="pin the tick thread and cyclictest to CPU N (default: not pinned)")
     parser.add_argument("--cyclictest", default="cyclictest", metavar="PATH",
                         help="cyclictest executable (default: found on PATH)")
     parser.add_argument("--no-cyclictest", action="store_true", help="skip the cyclictest run")
-    parser.add_argument("--rounds", type=int, default=ROUNDS, metavar="R",
+    parser.add_argument("--rounds", type=Number(int, 1), default=ROUNDS, metavar="R",
                         help=f"interleave the runs in R rounds (default {ROUNDS})")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
-    parser.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
-    args = parser.parse_args(argv)
-    if not args.seconds > 0:
-        parser.error("--seconds must be > 0")
-    if not 1 <= args.priority <= 99:
-        parser.error("--priority must be 1..99")
-    result = run(args.seconds, args.priority, not args.no_mlock,
+    parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
+
+
+def run(args) -> int:
+    result = collect(args.seconds, args.priority, not args.no_mlock,
                  None if args.no_cyclictest else args.cyclictest, cpu=args.cpu,
                  rounds=max(1, args.rounds))
     if args.json:
@@ -329,7 +329,13 @@ def main(argv=None) -> int:
         sys.stdout.write("\n")
     else:
         print(format_table(result))
-    return 1 if args.strict and any(ok is False for ok in result["targets"].values()) else 0
+    return exit_status(result["targets"].values(), args.strict)
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.jitter``: as ``marionette bench jitter``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "jitter", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

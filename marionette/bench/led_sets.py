@@ -1,6 +1,6 @@
 """LED sets lost to dropped detections in the teach-in (docs/teach.md, Strobe timing).
 
-    python -m marionette.bench.led_sets [--seeds N] [--duration S]
+    marionette bench led-sets [--seeds N] [--duration S]
 
 The teach simulator's dance (marionette.teach.synthetic, no shading, so that only
 single detections are lost) is observed by the two default cameras, each detection
@@ -11,11 +11,11 @@ rate, over fixed seeds, without and with the bridging across one lost sample.
 """
 from __future__ import annotations
 
-import argparse
 import sys
 
 import numpy as np
 
+from marionette.cli.options import Number
 from marionette.teach.filters import complement_missing_led
 from marionette.teach.pipeline import led_points
 from marionette.teach.rucksack import align_to_set_times
@@ -38,12 +38,16 @@ def lost_set_share(dropout: float, seeds, duration: float = 60.0, **align) -> fl
     return lost / total
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m marionette.bench.led_sets", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seeds", type=int, default=10, help="recordings per dropout rate (seeds 1..N)")
-    parser.add_argument("--duration", type=float, default=60.0, help="[s] of each recording")
-    args = parser.parse_args(argv)
+def register(sub) -> None:
+    parser = sub.add_parser("led-sets", help="LED sets lost to dropped detections, with and without bridging",
+                            description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seeds", type=Number(int, 1), default=10, metavar="N",
+                        help="recordings per dropout rate (seeds 1..N)")
+    parser.add_argument("--duration", type=Number(float, 1.0), default=60.0, metavar="S",
+                        help="[s] of each recording")
+
+
+def run(args) -> int:
     seeds = range(1, args.seeds + 1)
     print(f"LED sets lost, {args.seeds} recordings of {args.duration:g} s each:")
     for dropout in DROPOUTS:
@@ -51,6 +55,12 @@ def main(argv: list[str] | None = None) -> int:
         after = lost_set_share(dropout, seeds, args.duration)
         print(f"  dropped detections {dropout:.0%}: {before:.2%} without bridging, {after:.2%} with it")
     return 0
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.led_sets``: as ``marionette bench led-sets``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "led-sets", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -21,7 +21,6 @@ decode_frames_per_s, decode_mb_per_s, crc32_mb_per_s, decode_vs_crc32},
 """
 from __future__ import annotations
 
-import argparse
 import json
 import subprocess
 import sys
@@ -35,9 +34,11 @@ import numpy as np
 
 from marionette import protocol
 from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import Number
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
+from marionette.errors import MarionetteError
 from marionette.show import load_show
 
 PRIORITY = 40           # SCHED_FIFO of the engine, when permitted
@@ -51,7 +52,7 @@ def _start_sim(args: list[str]) -> tuple[subprocess.Popen, dict]:
     ready = json.loads(proc.stdout.readline() or "{}")
     if not ready.get("ready"):
         proc.kill()
-        raise RuntimeError(f"simulator did not start: {proc.stderr.read()}")
+        raise MarionetteError(f"simulator did not start: {proc.stderr.read()}")
     return proc, ready
 
 
@@ -138,12 +139,27 @@ def format_report(r: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="marionette bench link", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--seconds", type=float, default=5.0, help="real-time run per link [s]")
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "link", help="latency from the tick to a decoded frame in the simulator; codec rates",
+        description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=Number(float, 0.0, above=True), default=5.0,
+                        help="real-time run per link [s]")
     parser.add_argument("--json", action="store_true", help="print JSON instead of the table")
-    args = parser.parse_args(argv)
+
+
+def run(args) -> int:
     report = {"links": [link_latency(kind, args.seconds) for kind in ("serial", "can")],
               "codec": codec_rates(), "machine": machine_info()}
     print(json.dumps(report, indent=2) if args.json else format_report(report))
     return 0
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.link``: as ``marionette bench link``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "link", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

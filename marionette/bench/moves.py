@@ -13,19 +13,23 @@ Ruckig comes with the `bench` extra (pip install 'marionette[bench]').
 """
 from __future__ import annotations
 
-import argparse
 import json
+import sys
 import time
 
 import numpy as np
 
 from marionette._core import plan_move
+from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import SEED as SEED_OPTION, Number
+from marionette.errors import MarionetteError
 
 CASES = 10_000
 SEED = 20261122
-TARGETS = {"duration_ratio_max <= 1.001": lambda r: r["duration_ratio_max"] is not None
-           and r["duration_ratio_max"] <= 1.001,
+# verdict None: not measured (Ruckig not installed)
+TARGETS = {"duration_ratio_max <= 1.001": lambda r: None if r["duration_ratio_max"] is None
+           else r["duration_ratio_max"] <= 1.001,
            "violations == 0": lambda r: r["violations"] == 0,
            "climax_error_ticks_max_compensated <= 1": lambda r: r["climax_error_ticks_max_compensated"] <= 1}
 
@@ -60,7 +64,7 @@ def ruckig_duration(otg, inp, traj, case) -> float:
     inp.max_velocity, inp.max_acceleration, inp.max_jerk = [vmax], [amax], [float("inf")]
     result = otg.calculate(inp, traj)
     if result not in (Result.Working, Result.Finished):
-        raise RuntimeError(f"ruckig failed on {case}: {result}")
+        raise MarionetteError(f"ruckig failed on {case}: {result}")
     return traj.duration
 
 
@@ -98,24 +102,28 @@ def compare_with_ruckig(cases: np.ndarray) -> dict:
     return out
 
 
-def run(cases: int = CASES, seed: int = SEED, quick: bool = False) -> dict:
+def collect(cases: int = CASES, seed: int = SEED, quick: bool = False) -> dict:
     result = compare_with_ruckig(random_cases(cases, seed))
     from marionette.bench.climax import climax_timing
     result.update(climax_timing(seed=seed, seconds=10.0) if quick else climax_timing(seed=seed))
     result["machine"] = machine_info()
-    result["targets"] = {label: bool(check(result)) for label, check in TARGETS.items()}
+    result["targets"] = {label: check(result) for label, check in TARGETS.items()}
     return result
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="marionette bench moves", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--cases", type=int, default=CASES, help="random move cases")
-    parser.add_argument("--seed", type=int, default=SEED)
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "moves", help="online moves against Ruckig, limit violations, climax timing",
+        description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", type=Number(int, 1), default=CASES, help="random move cases")
+    parser.add_argument("--seed", type=SEED_OPTION, default=SEED, help="seed of the random cases")
     parser.add_argument("--quick", action="store_true", help="small counts, for tests")
     parser.add_argument("--json", action="store_true")
-    parser.add_argument("--strict", action="store_true", help="exit 1 when a target fails")
-    args = parser.parse_args(argv)
-    result = run(200 if args.quick else args.cases, args.seed, args.quick)
+    parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
+
+
+def run(args) -> int:
+    result = collect(200 if args.quick else args.cases, args.seed, args.quick)
     if args.json:
         print(json.dumps(result, indent=2))
     else:
@@ -133,5 +141,15 @@ def main(argv=None) -> int:
         print(f"  climax timing error [ticks]: max {r['climax_error_ticks_max_compensated']:.3f} compensated, "
               f"{r['climax_error_ticks_max_uncompensated']:.3f} uncompensated")
         for label, ok in r["targets"].items():
-            print(f"  target {label:<45} {'PASS' if ok else 'FAIL'}")
-    return 1 if args.strict and not all(result["targets"].values()) else 0
+            print(f"  target {label:<45} {verdict(ok)}")
+    return exit_status(result["targets"].values(), args.strict)
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.moves``: as ``marionette bench moves``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "moves", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":
+    sys.exit(main())

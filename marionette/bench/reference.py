@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from marionette.config import FigureConfig
+from marionette.errors import ArgumentError
 from marionette.show import Show, fit_to_figure
 
 LEADS = ("dead_time_lag", "mean_delay", "none")
@@ -128,14 +129,14 @@ class ReferenceEngine:
                  interpolation: str = "cubic", rate: float = 1.0, on_limits: str = "error",
                  fitted: bool = False):
         if lead not in LEADS:
-            raise ValueError(f"lead must be one of {LEADS}, not {lead!r}")
+            raise ArgumentError(f"lead must be one of {LEADS}, not {lead!r}")
         if interpolation not in INTERPOLATIONS:
-            raise ValueError(f"interpolation must be one of {INTERPOLATIONS}, not {interpolation!r}")
+            raise ArgumentError(f"interpolation must be one of {INTERPOLATIONS}, not {interpolation!r}")
         if not fitted:
             show = fit_to_figure(show, config, on_limits)
         if show.positions.shape[0] != len(config.axes):
-            raise ValueError(f"the show has {show.positions.shape[0]} axes, "
-                             f"the figure {len(config.axes)}")
+            raise ArgumentError(f"the show has {show.positions.shape[0]} axes, "
+                                f"the figure {len(config.axes)}")
         axes = config.axes
         self.period = float(config.tick_period)                              # T [s]
         self.interpolation = interpolation

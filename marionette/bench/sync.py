@@ -75,11 +75,11 @@ and run cued at the top (rows "wrong cue") and from an unknown start (rows
 
 CUE_TARGETS hold for the "cue at top" rows, WRONG_CUE_TARGETS for the
 "wrong cue" rows; the unknown-start rows beside them have no targets.
-`--strict` exits 1 when any target fails (as `bench tick` and `bench jitter`).
+`--strict` exits 1 when a target fails, as in every bench (a target without
+runs to measure it fails: runs that vanish are a fault).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -87,7 +87,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import SEED as SEED_OPTION, Number
 from marionette.music.feature import FRAME_PERIOD, loudness, onsets
 from marionette.music.follower import STATES, Follower, sync_ticks
 from marionette.sim.music import synthesize
@@ -309,8 +311,8 @@ def check_targets(result: dict, targets=TARGETS) -> list[tuple[str, float, bool]
     return out
 
 
-def run(seconds: float | None = None, quick: bool = False, seed: int = SEED, progress=None,
-        seeds: int = SEEDS) -> list[dict]:
+def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED, progress=None,
+            seeds: int = SEEDS) -> list[dict]:
     """One result per mode (smooth, paper) with the documented keys, over
     the scenarios of seeds seed, seed + 1, ... (seeds of them), then one
     per set of the cue's runs (smooth mode): "cue at top", "top, unknown",
@@ -468,7 +470,7 @@ def _target_lines(res: dict, targets) -> list[str]:
     lines, failed = [], 0
     for label, value, ok in check_targets(res, targets):
         failed += not ok
-        lines.append(f"  {label:<36} measured {value:>10.4g}   {'PASS' if ok else 'FAIL'}")
+        lines.append(f"  {label:<36} measured {value:>10.4g}   {verdict(ok)}")
     lines.append("all targets met" if not failed else f"{failed} target(s) FAILED")
     return lines
 
@@ -545,38 +547,42 @@ def _cue_lines(by_set: dict) -> list[str]:
     return lines
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="marionette bench sync",
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "sync", help="music following against ground truth (simulated tape deck)",
         description="Music following against ground truth: synthesized pieces played through a "
                     "simulated tape deck, smooth and paper mode side by side.")
     parser.add_argument("--json", action="store_true",
                         help="print a JSON list (one object per mode, then one per set of the cue's runs)")
-    parser.add_argument("--strict", action="store_true",
-                        help="exit with status 1 if a target fails (smooth mode, the cue's included)")
-    parser.add_argument("--seconds", type=float, default=None, metavar="S",
+    parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
+    parser.add_argument("--seconds", type=Number(float, 10.0), default=None, metavar="S",
                         help="cap each live recording at S seconds (default: to the piece's end)")
     parser.add_argument("--quick", action="store_true",
                         help="one short piece, two scenarios, their top variants and one wrong-cue "
                              "deck (smoke test; figures meaningless)")
-    parser.add_argument("--seed", type=int, default=SEED, help="seed of the first set of scenarios")
-    parser.add_argument("--seeds", type=int, default=SEEDS, metavar="N",
+    parser.add_argument("--seed", type=SEED_OPTION, default=SEED,
+                        help="seed of the first set of scenarios")
+    parser.add_argument("--seeds", type=Number(int, 1), default=SEEDS, metavar="N",
                         help=f"sets of scenarios, seeds SEED to SEED + N - 1 (default {SEEDS}): "
                              "tuning to one set does not pass")
-    args = parser.parse_args(argv)
-    if args.seconds is not None and not args.seconds >= 10.0:
-        parser.error("--seconds must be at least 10")
+
+
+def run(args) -> int:
     progress = None if args.json else (lambda msg: print(f"  {msg}", file=sys.stderr, flush=True))
-    if args.seeds < 1:
-        parser.error("--seeds must be at least 1")
-    results = run(args.seconds, args.quick, args.seed, progress, 1 if args.quick else args.seeds)
+    results = collect(args.seconds, args.quick, args.seed, progress, 1 if args.quick else args.seeds)
     if args.json:
         json.dump(results, sys.stdout, indent=2, default=float)
         sys.stdout.write("\n")
     else:
         print(format_table(results))
-    failed = any(not ok for res in results if res["mode"] == "smooth" for ok in res["targets"].values())
-    return 1 if args.strict and failed else 0
+    return exit_status((ok for res in results if res["mode"] == "smooth"
+                        for ok in res["targets"].values()), args.strict)
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.sync``: as ``marionette bench sync``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "sync", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -25,7 +25,6 @@ targets, machine).
 """
 from __future__ import annotations
 
-import argparse
 import gc
 import json
 import sys
@@ -33,8 +32,10 @@ import time
 
 import numpy as np
 
+from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
 from marionette.bench.reference import ReferenceEngine
+from marionette.cli.options import SEED as SEED_OPTION, Number
 from marionette.config import FigureConfig, config_from_dict
 from marionette.engine import Engine
 from marionette.show import Show
@@ -171,7 +172,7 @@ def check_targets(rows: list[dict]) -> list[tuple[str, float, bool]]:
     return out
 
 
-def run(sizes=SIZES, ticks: int | None = None, quick: bool = False, seed: int = SEED) -> list[dict]:
+def collect(sizes=SIZES, ticks: int | None = None, quick: bool = False, seed: int = SEED) -> list[dict]:
     """Rows for each axis count (see the module docstring); ticks overrides
     the per-size defaults, quick uses tiny counts (smoke tests)."""
     machine = machine_info()
@@ -205,36 +206,42 @@ def format_table(rows: list[dict]) -> str:
                  "numpy, perf_counter_ns per tick; diff: |engine - reference| last commands [unit]")
     lines.append("targets:")
     for label, value, ok in check_targets(rows):
-        lines.append(f"  {label:<34} measured {value:>10.3f}   {'PASS' if ok else 'FAIL'}")
+        lines.append(f"  {label:<34} measured {value:>10.3f}   {verdict(ok)}")
     return "\n".join(lines)
 
 
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="marionette bench tick",
+def register(sub) -> None:
+    parser = sub.add_parser(
+        "tick", help="compute time per tick, C engine vs the numpy reference",
         description="Compute time per tick [us] of the C engine in step mode, against the "
                     "numpy reference tick, for 16, 256 and 4096 axes.")
     parser.add_argument("--json", action="store_true",
                         help="print a JSON list of rows instead of the table")
     parser.add_argument("--quick", action="store_true",
                         help="tiny tick counts and a short show (smoke test; numbers meaningless)")
-    parser.add_argument("--axes", type=int, nargs="+", default=list(SIZES), metavar="N",
+    parser.add_argument("--axes", type=Number(int, 1, 65536), nargs="+", default=list(SIZES), metavar="N",
                         help="axis counts to run (default: 16 256 4096)")
-    parser.add_argument("--ticks", type=int, default=None, metavar="N",
+    parser.add_argument("--ticks", type=Number(int, 1), default=None, metavar="N",
                         help="ticks per axis count (default: 20000 for 16 and 256 axes, 5000 for 4096)")
-    parser.add_argument("--seed", type=int, default=SEED, help="seed of the synthetic figure and show")
-    parser.add_argument("--strict", action="store_true", help="exit with status 1 if a target fails")
-    args = parser.parse_args(argv)
-    if any(n < 1 for n in args.axes) or (args.ticks is not None and args.ticks < 1):
-        parser.error("axis counts and ticks must be >= 1")
-    rows = run(args.axes, args.ticks, args.quick, args.seed)
+    parser.add_argument("--seed", type=SEED_OPTION, default=SEED,
+                        help="seed of the synthetic figure and show")
+    parser.add_argument("--strict", action="store_true", help=STRICT_HELP)
+
+
+def run(args) -> int:
+    rows = collect(args.axes, args.ticks, args.quick, args.seed)
     if args.json:
         json.dump(rows, sys.stdout, indent=2)
         sys.stdout.write("\n")
     else:
         print(format_table(rows))
-    failed = any(not ok for row in rows for ok in row.get("targets", {}).values())
-    return 1 if args.strict and failed else 0
+    return exit_status((ok for row in rows for ok in row.get("targets", {}).values()), args.strict)
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.tick``: as ``marionette bench tick``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "tick", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from marionette.errors import ArgumentError
 from marionette.music.feature import BAND, FRAME_PERIOD, AudioError, LoudnessMeter, mono, read_wav
 
 N_BANDS = 6                 # bands between BAND[0] and BAND[1]: an octave apart [1]
@@ -81,7 +82,7 @@ class BandMeter(LoudnessMeter):
     def __init__(self, sample_rate: float, period: float = FRAME_PERIOD, n_bands: int = N_BANDS):
         super().__init__(sample_rate, period)
         if not (isinstance(n_bands, int) and 1 <= n_bands <= 32):
-            raise ValueError(f"n_bands {n_bands!r} is not a whole number from 1 to 32")
+            raise ArgumentError(f"n_bands {n_bands!r} is not a whole number from 1 to 32")
         self.n_bands = n_bands
         self.window_len = WINDOW_FRAMES * self.frame_len                # [samples]
         freqs = np.fft.rfftfreq(self.window_len, 1.0 / self.sample_rate)

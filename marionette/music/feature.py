@@ -16,6 +16,7 @@ of a recording at fs [Hz] with period T [s]: the music from k * T on.
 """
 from __future__ import annotations
 
+import struct
 import wave
 from pathlib import Path
 
@@ -161,21 +162,46 @@ def loudness(samples, sample_rate: float, period: float = FRAME_PERIOD) -> np.nd
     return LoudnessMeter(sample_rate, period).feed(samples)
 
 
+WAVE_PCM, WAVE_FLOAT, WAVE_EXTENSIBLE = 0x0001, 0x0003, 0xFFFE    # WAVE format tags
+
+
 def read_wav(path) -> tuple[np.ndarray, float]:
     """Samples scaled to [-1, 1] (shape (n,) or (n, channels)) and the sample rate [Hz].
 
-    Integer PCM WAV through the standard library; any other format through
-    the optional `soundfile` package when it is installed."""
+    Integer PCM (8, 16, 24, 32 bit) and float WAV, plain or WAVE_FORMAT_EXTENSIBLE
+    (as most 24-bit recorders write), read here; a file cut short gives the
+    whole frames it holds. Any other format through the optional `soundfile`
+    package when it is installed."""
     path = Path(path)
     try:
-        with wave.open(str(path), "rb") as w:
-            width, channels, rate = w.getsampwidth(), w.getnchannels(), w.getframerate()
-            raw = w.readframes(w.getnframes())
+        data = path.read_bytes()
     except FileNotFoundError:
         raise AudioError(f"{path}: no such audio file") from None
-    except (wave.Error, EOFError) as exc:
-        return _read_with_soundfile(path, exc)
-    if width == 1:
+    except OSError as exc:
+        raise AudioError(f"{path}: cannot read it: {exc.strerror}") from None
+    if not data:
+        raise AudioError(f"{path}: empty file, not a WAV file")
+    if data[:4] != b"RIFF" or data[8:12] != b"WAVE":
+        return _read_with_soundfile(path, "it does not begin with RIFF....WAVE")
+    fmt, samples = _wav_chunks(path, data)
+    tag, channels, rate, _, align, bits = struct.unpack_from("<HHIIHH", fmt)
+    if tag == WAVE_EXTENSIBLE:
+        if len(fmt) < 26:
+            raise AudioError(f"{path}: WAVE_FORMAT_EXTENSIBLE with a {len(fmt)}-byte fmt chunk, "
+                             "too short for its sub-format")
+        tag = struct.unpack_from("<H", fmt, 24)[0]          # the sub-format GUID's first field
+    if tag not in (WAVE_PCM, WAVE_FLOAT):
+        return _read_with_soundfile(path, f"WAVE format 0x{tag:04x}, neither integer PCM nor float")
+    width = align // channels if channels else 0             # container bytes per sample
+    if channels == 0 or rate == 0 or width == 0 or align != width * channels:
+        raise AudioError(f"{path}: a fmt chunk with {channels} channels, {rate} Hz, "
+                         f"{align} bytes per frame")
+    raw = samples[:len(samples) - len(samples) % align]        # whole frames (a file cut short)
+    if tag == WAVE_FLOAT:
+        if width not in (4, 8):
+            raise AudioError(f"{path}: {8 * width}-bit float samples are not supported")
+        x = np.frombuffer(raw, f"<f{width}").astype(np.float64)
+    elif width == 1:
         x = (np.frombuffer(raw, np.uint8).astype(np.float64) - 128.0) / 128.0
     elif width == 3:
         b = np.frombuffer(raw, np.uint8).reshape(-1, 3).astype(np.int32)
@@ -184,17 +210,36 @@ def read_wav(path) -> tuple[np.ndarray, float]:
     elif width in (2, 4):
         x = np.frombuffer(raw, f"<i{width}").astype(np.float64) / float(1 << (8 * width - 1))
     else:
-        raise AudioError(f"{path}: {8 * width}-bit samples are not supported")
+        raise AudioError(f"{path}: {8 * width}-bit samples ({bits} bits used) are not supported")
     if channels > 1:
         x = x.reshape(-1, channels)
     return x, float(rate)
 
 
-def _read_with_soundfile(path: Path, cause: Exception):
+def _wav_chunks(path: Path, data: bytes) -> tuple[bytes, bytes]:
+    """The fmt and data chunks of a RIFF WAVE file (data as far as the file goes)."""
+    fmt = samples = None
+    at = 12
+    while at + 8 <= len(data) and (fmt is None or samples is None):
+        name, size = data[at:at + 4], struct.unpack_from("<I", data, at + 4)[0]
+        body = data[at + 8:at + 8 + size]
+        if name == b"fmt ":
+            fmt = body
+        elif name == b"data":
+            samples = body
+        at += 8 + size + (size & 1)                          # chunks are padded to even sizes
+    if fmt is None or len(fmt) < 16:
+        raise AudioError(f"{path}: a WAV file without a whole fmt chunk (damaged or cut short)")
+    if samples is None:
+        raise AudioError(f"{path}: a WAV file without a data chunk (damaged or cut short)")
+    return fmt, samples
+
+
+def _read_with_soundfile(path: Path, cause: str):
     try:
         import soundfile
     except ImportError:
-        raise AudioError(f"{path}: not an integer PCM WAV file ({cause}); install the 'audio' "
+        raise AudioError(f"{path}: not a WAV file this reads ({cause}); install the 'audio' "
                          "extra (soundfile) to read other formats") from None
     try:
         x, rate = soundfile.read(str(path), dtype="float64", always_2d=False)

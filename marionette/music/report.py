@@ -28,6 +28,7 @@ UNFOLLOWED_LIMIT = 0.5          # play exits 1 when more of the show than this s
 SILENT_RMS = 1e-4               # a recording whose every frame is below this is silent [full scale]
 FLAT_RANGE_DB = 3.0             # ... or whose frames (10th to 90th percentile) span less [dB]
 SHORT_SHARE = 0.5               # a recording shorter than this share of the show's music is truncated [1]
+TAUGHT_SHORT_SHARE = 0.95       # ... taught music (teach): the show's end would follow silence [1]
 
 
 def lost_line(time_s: float, position_s: float, on_lost: str) -> str:
@@ -189,30 +190,32 @@ def verdict_line(s: FollowShare) -> str | None:
 
 
 def recording_warnings(path, loud: np.ndarray, period: float, show_seconds: float,
-                       cue_s: float | None) -> list[str]:
-    """Warnings about a live recording before the show: silent (every frame
+                       cue_s: float | None, kind: str = "live recording",
+                       short_share: float = SHORT_SHARE) -> list[str]:
+    """Warnings about a live recording before the show (or, kind "taught
+    music", the music that teach stores in the show): silent (every frame
     under SILENT_RMS [full scale], or the frames' levels span less than
     FLAT_RANGE_DB: a steady tone or hiss, not music) or truncated (shorter
-    than SHORT_SHARE of the show's music from the cue; cue_s None: unknown,
+    than short_share of the show's music from the cue; cue_s None: unknown,
     the whole music counts). loud: its loudness frames, one per period [s]."""
     loud = np.asarray(loud, dtype=np.float64)
     out = []
     seconds = len(loud) * period                                        # [s]
     if len(loud) == 0 or np.max(loud) < SILENT_RMS:
-        out.append(f"warning: live recording {path} is silent (every frame under "
+        out.append(f"warning: {kind} {path} is silent (every frame under "
                    f"{SILENT_RMS:g} full scale RMS); the music cannot be followed")
     else:
         db = 20 * np.log10(np.maximum(loud, 1e-12))
         spread = float(np.percentile(db, 90) - np.percentile(db, 10))
         if spread < FLAT_RANGE_DB:
-            out.append(f"warning: live recording {path} has no level range ({spread:.1f} dB "
+            out.append(f"warning: {kind} {path} has no level range ({spread:.1f} dB "
                        f"between its 10th and 90th percentile frames): a steady sound, not music")
     start = 0.0 if cue_s is None else float(cue_s)
     music = max(0.0, show_seconds - start)                              # [s]
-    if seconds < SHORT_SHARE * music:
+    if seconds < short_share * music:
         where = "the top" if cue_s is None else f"the cue at {start:g} s"
-        out.append(f"warning: live recording {path} is {seconds:.2f} s long, less than "
-                   f"{SHORT_SHARE:.0%} of the show's music from {where} ({music:.2f} s): truncated?")
+        out.append(f"warning: {kind} {path} is {seconds:.2f} s long, less than "
+                   f"{short_share:.0%} of the show's music from {where} ({music:.2f} s): truncated?")
     return out
 
 

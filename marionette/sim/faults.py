@@ -8,6 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from marionette.errors import ArgumentError
+
 
 @dataclass
 class Faults:
@@ -17,6 +19,7 @@ class Faults:
     position_noise: float = 0.0     # std dev of the reported position [counts]
     silent: set[int] = field(default_factory=set)   # nodes that neither listen nor answer
     seed: int = 0
+    nodes: frozenset[int] = frozenset()             # the figure's nodes, for 'silence N' (empty: any)
     rng: np.random.Generator = field(init=False, repr=False)
     bytes_dropped: int = 0
     bytes_corrupted: int = 0
@@ -45,23 +48,33 @@ class Faults:
     def apply(self, command: str) -> str:
         """A control line from the simulator's stdin, e.g. 'silence 3',
         'resume 3', 'drop 0.01', 'corrupt 0.001', 'delay 0.005', 'noise 2'.
-        Returns what changed, or raises ValueError."""
+        Returns what changed, or raises ArgumentError naming the line and value."""
         words = command.split()
         if len(words) != 2:
-            raise ValueError(f"fault command {command!r}: expected '<name> <value>'")
+            raise ArgumentError(f"fault command {command!r}: expected '<name> <value>'")
         name, value = words
         if name in ("silence", "resume"):
-            node = int(value)
+            try:
+                node = int(value)
+            except ValueError:
+                raise ArgumentError(f"fault command {command!r}: node {value!r} is not a whole "
+                                    "number") from None
+            if self.nodes and node not in self.nodes:
+                raise ArgumentError(f"fault command {command!r}: there is no node {node} "
+                                    f"(nodes: {', '.join(map(str, sorted(self.nodes)))})")
             (self.silent.add if name == "silence" else self.silent.discard)(node)
             return f"node {node} {'silenced' if name == 'silence' else 'resumed'}"
-        number = float(value)
+        try:
+            number = float(value)
+        except ValueError:
+            raise ArgumentError(f"fault command {command!r}: {value!r} is not a number") from None
         if not np.isfinite(number) or number < 0:
-            raise ValueError(f"fault command {command!r}: value must be finite and >= 0")
+            raise ArgumentError(f"fault command {command!r}: value must be finite and >= 0")
         attr = {"drop": "drop_rate", "corrupt": "corrupt_rate", "delay": "delay",
                 "noise": "position_noise"}.get(name)
         if attr is None:
-            raise ValueError(f"fault command {command!r}: unknown fault {name!r}")
+            raise ArgumentError(f"fault command {command!r}: unknown fault {name!r}")
         if attr.endswith("rate") and number > 1:
-            raise ValueError(f"fault command {command!r}: a rate is at most 1")
+            raise ArgumentError(f"fault command {command!r}: a rate is at most 1")
         setattr(self, attr, number)
         return f"{attr} = {number:g}"

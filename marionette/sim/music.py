@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from marionette.errors import ArgumentError
+
 SAMPLE_RATE = 16000     # [Hz] of the taught recordings the bench makes
 
 
@@ -216,7 +218,7 @@ def synthesize(style: str, seed: int = 1, sample_rate: float = SAMPLE_RATE,
     entry of FORMS (tempo [bpm], beats per bar, sections), replaces the
     style's own form: the style's notes in another order and length."""
     if style not in FORMS:
-        raise ValueError(f"unknown style {style!r} (known: {', '.join(STYLES)})")
+        raise ArgumentError(f"unknown style {style!r} (known: {', '.join(STYLES)})")
     bpm, per_bar, form = FORMS[style] if form is None else form
     form = form * repeat
     beat_s = 60.0 / bpm                                         # [s]

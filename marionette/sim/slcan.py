@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import os
 
+from marionette.errors import ArgumentError
+
 CR = b"\r"
 BELL = b"\x07"          # the adapter's "error" answer
 
@@ -58,7 +60,7 @@ class SlcanAdapter:
                 dlc = int(line[1 + width:2 + width])
                 payload = bytes.fromhex(line[2 + width:2 + width + 2 * dlc].decode())
                 if dlc > 8 or len(payload) != dlc:
-                    raise ValueError(line)
+                    raise ArgumentError(line)
                 return ((can_id, payload) if self.is_open else None), CR
             if kind == "O" or kind == "L":
                 self.is_open = True

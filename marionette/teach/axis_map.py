@@ -30,6 +30,8 @@ from typing import Mapping
 
 import numpy as np
 
+from marionette.errors import ArgumentError
+
 TURN = 2.0 * np.pi       # one full turn [rad]
 
 
@@ -95,7 +97,7 @@ class AxisMap:
         names = self.axis_names()
         dup = sorted({n for n in names if names.count(n) > 1})
         if dup:
-            raise ValueError(f"axis names must be unique; duplicated: {dup}")
+            raise ArgumentError(f"axis names must be unique; duplicated: {dup}")
 
     def axis_names(self) -> list[str]:
         """All output axis names, in output order."""
@@ -123,7 +125,7 @@ class AxisMap:
         known = {f for f in cls.__dataclass_fields__}
         unknown = sorted(set(data) - known)
         if unknown:
-            raise ValueError(f"unknown axis map key(s) {unknown}; known: {sorted(known)}")
+            raise ArgumentError(f"unknown axis map key(s) {unknown}; known: {sorted(known)}")
         if "winches" in data:
             data["winches"] = [_build(Winch, w, "attach") for w in data["winches"]]
         if "lights" in data:
@@ -134,11 +136,11 @@ class AxisMap:
 def _build(kind, item: Mapping, vector_key: str):
     unknown = sorted(set(item) - set(kind.__dataclass_fields__))
     if unknown:
-        raise ValueError(f"unknown {kind.__name__} key(s) {unknown}")
+        raise ArgumentError(f"unknown {kind.__name__} key(s) {unknown}")
     item = dict(item)
     vec = tuple(float(v) for v in item[vector_key])
     if len(vec) != 3:
-        raise ValueError(f"{kind.__name__} {vector_key} must have 3 entries [m], got {vec}")
+        raise ArgumentError(f"{kind.__name__} {vector_key} must have 3 entries [m], got {vec}")
     item[vector_key] = vec
     return kind(**item)
 
@@ -148,9 +150,9 @@ def map_axes(pose, config: AxisMap | None = None) -> dict[str, np.ndarray]:
     config = AxisMap() if config is None else config
     q = np.asarray(pose, float)
     if q.ndim != 2 or q.shape[1] != 6:
-        raise ValueError(f"pose must have shape (K, 6), got {q.shape}")
+        raise ArgumentError(f"pose must have shape (K, 6), got {q.shape}")
     if not np.all(np.isfinite(q)):
-        raise ValueError("pose contains NaN/inf; bridge gaps before mapping to axes")
+        raise ArgumentError("pose contains NaN/inf; bridge gaps before mapping to axes")
     x0, y0, z0, phi, theta, psi = q.T
     z_ref = float(np.mean(z0)) if config.z_ref is None else float(config.z_ref)
     lift = config.z_gain * (z0 - z_ref)                  # vertical displacement [m]
@@ -196,7 +198,7 @@ def fold_turns(angle, lo: float, hi: float) -> Fold:
     """
     a = np.asarray(angle, float)
     if hi - lo < TURN:
-        raise ValueError(f"range [{lo!r}, {hi!r}] rad is less than a full turn: cannot fold")
+        raise ArgumentError(f"range [{lo!r}, {hi!r}] rad is less than a full turn: cannot fold")
     fewest = np.ceil((lo - a) / TURN)       # turns that lift each sample to at least lo [1]
     most = np.floor((hi - a) / TURN)        # turns that keep it at most hi [1]
     turns = np.zeros(a.size, int)

@@ -44,6 +44,7 @@ from .camera import (
     project,
     rotation_matrix,
 )
+from marionette.errors import ArgumentError
 
 MIN_MARKERS = 5                 # eq. 4.8 is written for n = 5 markers
 DEFAULT_MAX_CONDITION = 1e10    # limit of cond(D J^T J D), D = column scaling [1]
@@ -159,33 +160,33 @@ def _check_inputs(markers, pixels, free, labels):
     X = np.asarray(markers, float)
     pix = np.asarray(pixels, float)
     if X.ndim != 2 or X.shape[1] != 3:
-        raise ValueError(f"markers must have shape (n, 3) [m], got {X.shape}")
+        raise ArgumentError(f"markers must have shape (n, 3) [m], got {X.shape}")
     if pix.shape != (X.shape[0], 2):
-        raise ValueError(f"pixels must have shape ({X.shape[0]}, 2) [pixel], got {pix.shape}")
+        raise ArgumentError(f"pixels must have shape ({X.shape[0]}, 2) [pixel], got {pix.shape}")
     if labels is not None and len(labels) != X.shape[0]:
-        raise ValueError(f"{len(labels)} labels given for {X.shape[0]} markers")
+        raise ArgumentError(f"{len(labels)} labels given for {X.shape[0]} markers")
     bad_names = [n for n in free if n not in PARAMETER_NAMES]
     if bad_names:
-        raise ValueError(f"cannot estimate {bad_names}; estimable: {list(PARAMETER_NAMES)}")
+        raise ArgumentError(f"cannot estimate {bad_names}; estimable: {list(PARAMETER_NAMES)}")
     if len(set(free)) != len(free) or not free:
-        raise ValueError(f"free parameters must be unique and non-empty, got {list(free)}")
+        raise ArgumentError(f"free parameters must be unique and non-empty, got {list(free)}")
     n = X.shape[0]
     for i in range(n):
         if not np.all(np.isfinite(X[i])):
-            raise ValueError(f"marker {_label(labels, i)}: position {X[i].tolist()} is not finite")
+            raise ArgumentError(f"marker {_label(labels, i)}: position {X[i].tolist()} is not finite")
         if not np.all(np.isfinite(pix[i])):
-            raise ValueError(f"marker {_label(labels, i)}: pixels {pix[i].tolist()} are not finite")
+            raise ArgumentError(f"marker {_label(labels, i)}: pixels {pix[i].tolist()} are not finite")
     if n < MIN_MARKERS:
-        raise ValueError(f"calibration needs at least {MIN_MARKERS} markers, got {n}")
+        raise ArgumentError(f"calibration needs at least {MIN_MARKERS} markers, got {n}")
     if 2 * n <= len(free):
-        raise ValueError(
+        raise ArgumentError(
             f"{n} markers give {2 * n} equations, not enough for {len(free)} free "
             f"parameters {list(free)}; use at least {len(free) // 2 + 1} markers"
         )
     for i in range(n):
         for j in range(i + 1, n):
             if np.linalg.norm(X[i] - X[j]) < MIN_SEPARATION:
-                raise ValueError(
+                raise ArgumentError(
                     f"markers {_label(labels, i)} and {_label(labels, j)} coincide "
                     f"(closer than {MIN_SEPARATION} m)"
                 )
@@ -194,7 +195,7 @@ def _check_inputs(markers, pixels, free, labels):
     off_line = np.linalg.norm(centred - np.outer(centred @ vt[0], vt[0]), axis=1)
     if off_line.max() < LINE_TOLERANCE:
         names = ", ".join(_label(labels, i) for i in range(n))
-        raise ValueError(
+        raise ArgumentError(
             f"markers {names} are collinear (all within {LINE_TOLERANCE} m of one line): "
             "the rotation about that line cannot be identified"
         )
@@ -227,7 +228,7 @@ def _check_condition(J, free, X, labels, max_condition, where):
     if cond > max_condition:
         order = np.argsort(-np.abs(weak))
         combo = " ".join(f"{weak[k]:+.2f}*{free[k]}" for k in order[:4] if abs(weak[k]) > 0.05)
-        raise ValueError(
+        raise ArgumentError(
             f"ill-conditioned camera calibration at the {where}: condition number of the "
             f"scaled J^T J is {cond:.3g} (limit {max_condition:.3g}); parameters "
             f"{[free[k] for k in order[:4] if abs(weak[k]) > 0.05]} are not separately "
@@ -241,7 +242,7 @@ def _check_in_front(cam: CameraParams, X, labels, where):
     behind = np.nonzero(uvw[:, 1] <= 0.0)[0]
     if behind.size:
         names = ", ".join(_label(labels, i) for i in behind)
-        raise ValueError(f"markers {names} are behind the camera at the {where}")
+        raise ArgumentError(f"markers {names} are behind the camera at the {where}")
 
 
 # ----------------------------------------------------------------------------------
@@ -257,7 +258,7 @@ def _gradient_cosine(J: np.ndarray, r: np.ndarray) -> float:
 
 def _prepare(markers, pixels, guess, free, labels, residual, max_condition):
     if residual not in ("algebraic", "pixel"):
-        raise ValueError(f"residual must be 'algebraic' or 'pixel', got {residual!r}")
+        raise ArgumentError(f"residual must be 'algebraic' or 'pixel', got {residual!r}")
     if not isinstance(guess, CameraParams):
         raise TypeError("guess must be a CameraParams (a starting guess is required)")
     free = tuple(free)
@@ -267,7 +268,7 @@ def _prepare(markers, pixels, guess, free, labels, residual, max_condition):
     p = guess.to_vector(free)
     r = prob.residual(p)
     if not np.all(np.isfinite(r)):
-        raise ValueError("residual at the starting guess is not finite; check the guess")
+        raise ArgumentError("residual at the starting guess is not finite; check the guess")
     J = prob.jacobian(p)
     _check_condition(J, free, X, labels, max_condition, "starting guess")
     return prob, p, r, J
@@ -389,7 +390,7 @@ def calibrate_steepest_descent(
     else:
         s = np.asarray(scale, float)
         if s.shape != p.shape or np.any(s <= 0):
-            raise ValueError(f"scale must be {len(p)} positive numbers, one per free parameter")
+            raise ArgumentError(f"scale must be {len(p)} positive numbers, one per free parameter")
     F = _sum_sq(r)
     h = 0.1
     converged = False
@@ -426,7 +427,7 @@ def calibrate(markers, pixels, guess: CameraParams, method: str = "lm", **kwargs
         return calibrate_lm(markers, pixels, guess, **kwargs)
     if method == "steepest_descent":
         return calibrate_steepest_descent(markers, pixels, guess, **kwargs)
-    raise ValueError(f"unknown calibration method {method!r}; use 'lm' or 'steepest_descent'")
+    raise ArgumentError(f"unknown calibration method {method!r}; use 'lm' or 'steepest_descent'")
 
 
 __all__ = [

@@ -48,6 +48,8 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from marionette.errors import ArgumentError
+
 # Names of the parameters that calibration may estimate, in vector order.
 PARAMETER_NAMES: tuple[str, ...] = (
     "a", "b", "c",            # camera position [m]
@@ -95,14 +97,14 @@ class CameraParams:
             try:
                 value = float(value)
             except (TypeError, ValueError):
-                raise ValueError(f"camera parameter {name}={value!r} is not a number") from None
+                raise ArgumentError(f"camera parameter {name}={value!r} is not a number") from None
             if not math.isfinite(value):
-                raise ValueError(f"camera parameter {name}={value!r} is not finite")
+                raise ArgumentError(f"camera parameter {name}={value!r} is not finite")
             object.__setattr__(self, name, value)
         if self.L <= 0.0:
-            raise ValueError(f"camera constant L={self.L!r} pixel must be > 0")
+            raise ArgumentError(f"camera constant L={self.L!r} pixel must be > 0")
         if self.rho_max <= 0.0:
-            raise ValueError(f"rho_max={self.rho_max!r} must be > 0")
+            raise ArgumentError(f"rho_max={self.rho_max!r} must be > 0")
 
     # -- derived quantities -------------------------------------------------------
     @property
@@ -137,12 +139,12 @@ class CameraParams:
         _check_names(names)
         values = [float(v) for v in vector]
         if len(values) != len(names):
-            raise ValueError(f"vector has {len(values)} entries but {len(names)} names were given")
+            raise ArgumentError(f"vector has {len(values)} entries but {len(names)} names were given")
         changes = dict(zip(names, values))
         if base is None:
             missing = [n for n in ("a", "b", "c") if n not in changes]
             if missing:
-                raise ValueError(f"from_vector without base needs {missing}")
+                raise ArgumentError(f"from_vector without base needs {missing}")
             return cls(**changes)
         return dataclasses.replace(base, **changes)
 
@@ -155,19 +157,19 @@ class CameraParams:
         """Inverse of :meth:`to_dict`; unknown keys are an error, missing keys default."""
         unknown = sorted(set(data) - set(ALL_NAMES))
         if unknown:
-            raise ValueError(f"unknown camera parameter(s) {unknown}; known: {list(ALL_NAMES)}")
+            raise ArgumentError(f"unknown camera parameter(s) {unknown}; known: {list(ALL_NAMES)}")
         for key in ("a", "b", "c"):
             if key not in data:
-                raise ValueError(f"camera parameter {key!r} (position [m]) is missing")
+                raise ArgumentError(f"camera parameter {key!r} (position [m]) is missing")
         return cls(**{k: data[k] for k in data})  # type: ignore[arg-type]
 
 
 def _check_names(names: Sequence[str]) -> None:
     bad = [n for n in names if n not in ALL_NAMES]
     if bad:
-        raise ValueError(f"unknown camera parameter name(s) {bad}")
+        raise ArgumentError(f"unknown camera parameter name(s) {bad}")
     if len(set(names)) != len(names):
-        raise ValueError(f"duplicate camera parameter names in {list(names)}")
+        raise ArgumentError(f"duplicate camera parameter names in {list(names)}")
 
 
 # ----------------------------------------------------------------------------------
@@ -355,7 +357,7 @@ def look_at(position, target, roll: float = 0.0, **kwargs) -> CameraParams:
     d = np.asarray(target, float) - p
     horizontal = math.hypot(d[0], d[1])
     if horizontal == 0.0:
-        raise ValueError("look_at: target straight above/below the camera; yaw undefined")
+        raise ArgumentError("look_at: target straight above/below the camera; yaw undefined")
     gamma = math.atan2(-d[0], d[1])
     alpha = math.atan2(d[2], horizontal)
     return CameraParams(a=p[0], b=p[1], c=p[2], alpha=alpha, beta=roll, gamma=gamma, **kwargs)

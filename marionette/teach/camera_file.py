@@ -44,11 +44,13 @@ import tomllib
 from typing import Sequence
 
 from .camera import ALL_NAMES, UNITS, CameraParams, look_at
+from marionette.errors import ArgumentError, MarionetteError
+from marionette.textfile import read_text
 
 INFO_TABLES = ("calibration", "uncertainty")
 
 
-class CameraFileError(ValueError):
+class CameraFileError(MarionetteError, ValueError):
     """cameras.toml is unreadable or invalid; the message names the file and camera."""
 
 
@@ -56,8 +58,7 @@ def read_cameras(path) -> list[CameraParams]:
     """Cameras of a cameras.toml file, in order (see the module docstring)."""
     path = os.fspath(path)
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+        data = tomllib.loads(read_text(path, CameraFileError))
     except FileNotFoundError:
         raise CameraFileError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:
@@ -89,13 +90,13 @@ def cameras_from_dict(data: dict, path: str = "<cameras>") -> list[CameraParams]
         try:
             if target is not None:
                 if "alpha" in params or "gamma" in params:
-                    raise ValueError("give either target or the angles alpha, gamma, not both")
+                    raise ArgumentError("give either target or the angles alpha, gamma, not both")
                 if (not isinstance(target, list) or len(target) != 3
                         or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in target)):
-                    raise ValueError(f"target = {target!r} must be three numbers [m]")
+                    raise ArgumentError(f"target = {target!r} must be three numbers [m]")
                 missing = [n for n in ("a", "b", "c") if n not in params]
                 if missing:
-                    raise ValueError(f"camera parameter {missing[0]!r} (position [m]) is missing")
+                    raise ArgumentError(f"camera parameter {missing[0]!r} (position [m]) is missing")
                 position = [params.pop(n) for n in ("a", "b", "c")]
                 beta = params.pop("beta", 0.0)
                 cameras.append(look_at(position, target, roll=beta, **params))

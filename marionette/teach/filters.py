@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from marionette.errors import ArgumentError
+
 DEFAULT_NUMTAPS = 21          # FIR length [taps]
 DEFAULT_SAMPLE_RATE = 12.5    # rate of LED sets [Hz]
 DEFAULT_CUTOFF = 2.0          # -6 dB point of the low-pass [Hz]
@@ -44,7 +46,7 @@ def complement_missing_led(points):
     """
     X = np.array(points, dtype=float, copy=True)
     if X.ndim != 3 or X.shape[1:] != (4, 3):
-        raise ValueError(f"points must have shape (K, 4, 3) [m], got {X.shape}")
+        raise ArgumentError(f"points must have shape (K, 4, 3) [m], got {X.shape}")
     missing = ~np.all(np.isfinite(X), axis=2)          # (K, 4)
     n_missing = missing.sum(axis=1)
     X[missing] = np.nan
@@ -81,21 +83,21 @@ def bridge_gaps(t, y, max_gap: float | None = None):
     one_d = y.ndim == 1
     Y = y[:, None] if one_d else y
     if Y.shape[0] != t.size:
-        raise ValueError(f"t has {t.size} samples but y has {Y.shape[0]}")
+        raise ArgumentError(f"t has {t.size} samples but y has {Y.shape[0]}")
     if np.any(np.diff(t) <= 0):
-        raise ValueError("t must be strictly increasing")
+        raise ArgumentError("t must be strictly increasing")
     out = Y.copy()
     missing = ~np.isfinite(Y)
     for col in range(Y.shape[1]):
         ok = ~missing[:, col]
         if not np.any(ok):
-            raise ValueError(f"column {col} has no valid sample to bridge from")
+            raise ArgumentError(f"column {col} has no valid sample to bridge from")
         tv = t[ok]
         if max_gap is not None and tv.size > 1:
             gaps = np.diff(tv)
             k = np.nonzero(gaps > max_gap)[0]
             if k.size:
-                raise ValueError(
+                raise ArgumentError(
                     f"gap from t={tv[k[0]]:.3f} s to t={tv[k[0] + 1]:.3f} s "
                     f"({gaps[k[0]]:.3f} s) exceeds max_gap={max_gap} s"
                 )
@@ -120,7 +122,7 @@ def window(name: str, n: int) -> np.ndarray:
         return 0.42 - 0.5 * np.cos(x) + 0.08 * np.cos(2.0 * x)
     if name == "rectangular":
         return np.ones(n)
-    raise ValueError(f"unknown window {name!r}")
+    raise ArgumentError(f"unknown window {name!r}")
 
 
 def design_lowpass(
@@ -140,10 +142,10 @@ def design_lowpass(
     the tests.
     """
     if numtaps < 3 or numtaps % 2 == 0:
-        raise ValueError(f"numtaps={numtaps} must be odd and >= 3")
+        raise ArgumentError(f"numtaps={numtaps} must be odd and >= 3")
     nyquist = 0.5 * sample_rate_hz
     if not 0.0 < cutoff_hz < nyquist:
-        raise ValueError(f"cutoff {cutoff_hz} Hz must lie in (0, {nyquist}) Hz (Nyquist)")
+        raise ArgumentError(f"cutoff {cutoff_hz} Hz must lie in (0, {nyquist}) Hz (Nyquist)")
     fc = cutoff_hz / sample_rate_hz
     m = np.arange(numtaps) - (numtaps - 1) / 2.0
     h = 2.0 * fc * np.sinc(2.0 * fc * m) * window(window_name, numtaps)
@@ -167,9 +169,9 @@ def fir_filter(y, taps) -> np.ndarray:
     taps = np.asarray(taps, float)
     y = np.asarray(y, float)
     if not np.all(np.isfinite(y)):
-        raise ValueError("fir_filter: input contains NaN/inf; bridge gaps first")
+        raise ArgumentError("fir_filter: input contains NaN/inf; bridge gaps first")
     if taps.size % 2 == 0 or not np.allclose(taps, taps[::-1]):
-        raise ValueError("fir_filter needs symmetric taps of odd length (linear phase)")
+        raise ArgumentError("fir_filter needs symmetric taps of odd length (linear phase)")
     M = taps.size // 2
     one_d = y.ndim == 1
     Y = y[:, None] if one_d else y
@@ -206,7 +208,7 @@ class SoftLimit:
 
     def __post_init__(self) -> None:
         if not (self.gain > 0 and 0 <= self.knee < self.limit):
-            raise ValueError(
+            raise ArgumentError(
                 f"SoftLimit needs gain > 0 and 0 <= knee < limit, got gain={self.gain}, "
                 f"knee={self.knee}, limit={self.limit}"
             )
@@ -224,7 +226,7 @@ class SoftLimit:
         a = np.abs(d)
         span = self.limit - self.knee
         if np.any(a >= self.limit):
-            raise ValueError(f"inverse defined only for |y - out_center| < {self.limit} m")
+            raise ArgumentError(f"inverse defined only for |y - out_center| < {self.limit} m")
         bent = self.knee + span * np.arctanh(np.clip((a - self.knee) / span, 0.0, 1.0 - 1e-16))
         z = np.where(a <= self.knee, d, np.sign(d) * bent)
         return self.in_center + z / self.gain
@@ -242,7 +244,7 @@ def soft_limit_for_areas(
     ``out_center +- edge_fraction * out_half`` [m], linear up to ``knee_fraction *
     out_half`` and bounded by ``out_half``.  E.g. 4 m -> 1.5 m: in_half 2, out_half 0.75."""
     if not (0 <= knee_fraction < edge_fraction < 1):
-        raise ValueError("need 0 <= knee_fraction < edge_fraction < 1")
+        raise ArgumentError("need 0 <= knee_fraction < edge_fraction < 1")
     knee = knee_fraction * out_half
     span = out_half - knee
     z_edge = knee + span * math.atanh((edge_fraction * out_half - knee) / span)
@@ -268,13 +270,13 @@ def resample(t, y, dt: float = TICK, t_start: float | None = None, t_end: float 
     one_d = y.ndim == 1
     Y = y[:, None] if one_d else y
     if t.ndim != 1 or Y.shape[0] != t.size or t.size < 2:
-        raise ValueError("resample needs t (K,), y (K, ...) with K >= 2 samples")
+        raise ArgumentError("resample needs t (K,), y (K, ...) with K >= 2 samples")
     if np.any(np.diff(t) <= 0):
-        raise ValueError("t must be strictly increasing")
+        raise ArgumentError("t must be strictly increasing")
     if not np.all(np.isfinite(Y)):
-        raise ValueError("resample: input contains NaN/inf; bridge gaps first")
+        raise ArgumentError("resample: input contains NaN/inf; bridge gaps first")
     if not dt > 0:
-        raise ValueError(f"dt={dt} s must be > 0")
+        raise ArgumentError(f"dt={dt} s must be > 0")
     if t_start is None:
         t_start = math.ceil(t[0] / dt - 1e-9) * dt
     if t_end is None:
@@ -298,5 +300,5 @@ def resample(t, y, dt: float = TICK, t_start: float | None = None, t_end: float 
         out = ((2 * s3 - 3 * s2 + 1) * y0 + (s3 - 2 * s2 + s) * h[:, None] * m[i]
                + (-2 * s3 + 3 * s2) * y1 + (s3 - s2) * h[:, None] * m[i + 1])
     else:
-        raise ValueError(f"unknown resampling method {method!r}; use 'linear' or 'cubic'")
+        raise ArgumentError(f"unknown resampling method {method!r}; use 'linear' or 'cubic'")
     return t_out, (out[:, 0] if one_d else out)

@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from .camera import CameraParams
+from marionette.errors import ArgumentError
 
 PLANE_TOLERANCE = 1e-3   # markers within this distance of a plane count as coplanar [m]
 
@@ -36,7 +37,7 @@ def _normalise_image(m: np.ndarray):
     """Scale centred image coordinates (n, 2) [pixel] to rms sqrt(2); returns (scaled, s)."""
     s = float(np.sqrt(np.mean(np.sum(m * m, axis=1)) / 2.0))
     if s == 0.0:
-        raise ValueError("all markers are imaged on the optical axis")
+        raise ArgumentError("all markers are imaged on the optical axis")
     return m / s, s
 
 
@@ -64,7 +65,7 @@ def _nearest_rotation(M: np.ndarray) -> np.ndarray:
 
 def _camera(C, a, L, R0, T0, rho_max, image_diagonal_half):
     if not (math.isfinite(L) and L > 0):
-        raise ValueError(f"linear solution gives no usable camera constant (L = {L!r})")
+        raise ArgumentError(f"linear solution gives no usable camera constant (L = {L!r})")
     alpha, beta, gamma = _angles(C)
     if rho_max is None:
         rho_max = image_diagonal_half / L if image_diagonal_half else 1.0
@@ -132,8 +133,8 @@ def _plane(X: np.ndarray, m: np.ndarray):
     norm = float(coef @ coef)
     w = float(coef @ rhs) / norm if norm > 0 else 0.0
     if not w > 0.0:
-        raise ValueError("the marker plane is (nearly) parallel to the image plane: "
-                         "the camera constant L cannot be found linearly")
+        raise ArgumentError("the marker plane is (nearly) parallel to the image plane: "
+                            "the camera constant L cannot be found linearly")
     L = 1.0 / math.sqrt(w)
     Kinv = np.diag([1.0 / L, 1.0 / L, 1.0])
     g1, g2, g3 = Kinv @ h1, Kinv @ h2, Kinv @ h3
@@ -161,22 +162,22 @@ def starting_guess(markers, pixels, R0: float, T0: float, *, rho_max: float | No
     X = np.asarray(markers, float)
     pix = np.asarray(pixels, float)
     if X.ndim != 2 or X.shape[1] != 3 or pix.shape != (X.shape[0], 2):
-        raise ValueError(f"markers (n, 3) and pixels (n, 2) expected, got {X.shape}, {pix.shape}")
+        raise ArgumentError(f"markers (n, 3) and pixels (n, 2) expected, got {X.shape}, {pix.shape}")
     n = X.shape[0]
     m = pix - np.array([R0, T0])
     centred = X - X.mean(axis=0)
     if n < 4:
-        raise ValueError(f"{n} markers; an automatic guess needs at least 4 (in one plane) or 6")
+        raise ArgumentError(f"{n} markers; an automatic guess needs at least 4 (in one plane) or 6")
     _, s, vt = np.linalg.svd(centred)
     off_line = np.linalg.norm(centred - np.outer(centred @ vt[0], vt[0]), axis=1).max()
     if off_line < PLANE_TOLERANCE:
-        raise ValueError("the markers lie on one line: no camera can be found from them")
+        raise ArgumentError("the markers lie on one line: no camera can be found from them")
     off_plane = np.abs(centred @ vt[2]).max()
     if off_plane < PLANE_TOLERANCE:
         C, a, L = _plane(X, m)
     else:
         if n < 6:
-            raise ValueError(f"{n} markers not in one plane; an automatic guess needs at least 6 "
-                             "(or all of them in one plane)")
+            raise ArgumentError(f"{n} markers not in one plane; an automatic guess needs at least 6 "
+                                "(or all of them in one plane)")
         C, a, L = _from_projection(_dlt(X, m), X)
     return _camera(C, a, L, R0, T0, rho_max, image_diagonal_half)

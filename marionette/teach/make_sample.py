@@ -39,6 +39,7 @@ from marionette.teach.markers import CameraMarkers, write_markers
 from marionette.teach.recording import write_recording
 from marionette.teach.synthetic import (IMAGE_SIZE, Dance, SyntheticRecording, default_cameras,
                                         synthetic_recording)
+from marionette.errors import ArgumentError
 
 SAMPLE_DIR = Path(__file__).resolve().parent.parent / "data" / "sample"
 SEED = 1996
@@ -165,7 +166,7 @@ def write_sample(directory, seed: int = SEED, duration: float | None = None,
     if duration is None:
         duration = song.duration
     elif not 0.0 < duration <= song.duration:
-        raise ValueError(f"duration {duration!r} s: the sample's song lasts {song.duration:g} s")
+        raise ArgumentError(f"duration {duration!r} s: the sample's song lasts {song.duration:g} s")
     music = song.samples[:int(round(duration * SAMPLE_RATE))]
     rng = np.random.default_rng(seed)
     cameras = default_cameras() if cameras is None else cameras

@@ -22,13 +22,15 @@ and lines starting with ``#`` are ignored.  Errors raise :class:`MarkerError` (a
 
 from __future__ import annotations
 
+import io
 import math
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
-from marionette.errors import LineError
+from marionette.errors import ArgumentError, LineError, TeachError
+from marionette.textfile import read_text
 
 HEADER = ("camera", "marker", "x", "y", "z", "R", "T")
 
@@ -109,15 +111,15 @@ def parse_markers(lines, path="<markers>") -> list[CameraMarkers]:
     n = max(per_camera) + 1
     missing = [k for k in range(n) if k not in per_camera]
     if missing:
-        raise ValueError(f"{path}: camera {missing[0]} has no markers "
-                         f"(cameras are numbered 0..{n - 1} without gaps)")
+        raise ArgumentError(f"{path}: camera {missing[0]} has no markers "
+                            f"(cameras are numbered 0..{n - 1} without gaps)")
     return [per_camera[k] for k in range(n)]
 
 
 def read_markers(path) -> list[CameraMarkers]:
     """Read a marker file; raises :class:`MarkerError` on malformed content."""
-    with open(path, encoding="utf-8", newline="") as fh:
-        return parse_markers(fh, path=os.fspath(path))
+    text = read_text(path, TeachError)
+    return parse_markers(io.StringIO(text, newline=""), path=os.fspath(path))
 
 
 def _format(value: float) -> str:

@@ -31,6 +31,7 @@ from .filters import (
 from .recording import Recording
 from .rucksack import SET_PERIOD, RucksackFit, align_to_set_times, fit_linear, fit_nonlinear
 from .triangulate import DEFAULT_MAX_RESIDUAL_PX, triangulate
+from marionette.errors import ArgumentError
 
 
 @dataclass
@@ -166,9 +167,9 @@ def teach_poses(
     complemented = fit(filled, b).pose
     missing = ~np.all(np.isfinite(complemented), axis=1)
     if missing.all():
-        raise ValueError("no LED set could be reconstructed: every set misses two or more LEDs")
+        raise ArgumentError("no LED set could be reconstructed: every set misses two or more LEDs")
     if t_sets.size < 2:
-        raise ValueError("the recording holds fewer than two LED sets (160 ms)")
+        raise ArgumentError("the recording holds fewer than two LED sets (160 ms)")
     q = complemented.copy()
     q[:, 5] = unwrap_angle(q[:, 5])
     bridged, _ = bridge_gaps(t_sets, q, max_gap=max_gap)
@@ -179,7 +180,7 @@ def teach_poses(
     if compress_y is not None:
         compressed[:, 1] = compress_y(compressed[:, 1])
     if t_sets[-1] < 0:
-        raise ValueError("every set lies before time 0 (the start of the music)")
+        raise ArgumentError("every set lies before time 0 (the start of the music)")
     t_tick, q_tick = resample(t_sets, compressed, dt=dt, t_start=0.0)
     n_lead = int(round(t_tick[0] / dt))      # ticks before the first set: hold its pose
     q_tick = np.concatenate([np.repeat(q_tick[:1], n_lead, axis=0), q_tick])

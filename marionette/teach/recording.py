@@ -23,13 +23,15 @@ number (1-based) and the offending value.
 
 from __future__ import annotations
 
+import io
 import math
 import os
 from dataclasses import dataclass
 
 import numpy as np
 
-from marionette.errors import LineError
+from marionette.errors import ArgumentError, LineError, TeachError
+from marionette.textfile import read_text
 
 HEADER = ("time_s", "camera", "led", "R", "T")
 N_LEDS = 4
@@ -57,7 +59,7 @@ class Recording:
         self.T = np.asarray(self.T, float)
         shapes = {a.shape for a in (self.time_s, self.camera, self.led, self.R, self.T)}
         if len(shapes) != 1 or self.time_s.ndim != 1:
-            raise ValueError(f"recording columns must be 1-D of equal length, got {shapes}")
+            raise ArgumentError(f"recording columns must be 1-D of equal length, got {shapes}")
 
     def __len__(self) -> int:
         return int(self.time_s.size)
@@ -73,7 +75,7 @@ class Recording:
         leds[inverse] = self.led
         pixels = np.full((n_cameras, times.size, 2), np.nan)
         if np.any((self.camera < 0) | (self.camera >= n_cameras)):
-            raise ValueError(f"camera index outside 0..{n_cameras - 1}")
+            raise ArgumentError(f"camera index outside 0..{n_cameras - 1}")
         pixels[self.camera, inverse, 0] = self.R
         pixels[self.camera, inverse, 1] = self.T
         return times, leds, pixels
@@ -161,8 +163,8 @@ def parse_recording(lines, path="<recording>", n_cameras: int = 2) -> Recording:
 
 def read_recording(path, n_cameras: int = 2) -> Recording:
     """Read a recording CSV file; raises :class:`RecordingError` on malformed content."""
-    with open(path, encoding="utf-8", newline="") as fh:
-        return parse_recording(fh, path=os.fspath(path), n_cameras=n_cameras)
+    text = read_text(path, TeachError)
+    return parse_recording(io.StringIO(text, newline=""), path=os.fspath(path), n_cameras=n_cameras)
 
 
 def _format(value: float) -> str:
@@ -178,7 +180,7 @@ def format_recording(rec: Recording) -> str:
         values = getattr(rec, name)
         bad = np.nonzero(~np.isfinite(values))[0]
         if bad.size:
-            raise ValueError(f"cannot write detection {bad[0]}: {name}={float(values[bad[0]])!r} is not finite")
+            raise ArgumentError(f"cannot write detection {bad[0]}: {name}={float(values[bad[0]])!r} is not finite")
     out = [",".join(HEADER)]
     for t, c, l, R, T in zip(rec.time_s, rec.camera, rec.led, rec.R, rec.T):
         out.append(f"{repr(float(t))},{int(c)},{int(l)},{_format(R)},{_format(T)}")

@@ -40,6 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from marionette.errors import ArgumentError
+
 FIELD_PERIOD = 0.020            # one video field [s]
 SET_PERIOD = 4 * FIELD_PERIOD   # one set of four LEDs [s] (12.5 Hz)
 SET_TIME_OFFSET = 1.5 * FIELD_PERIOD  # mean field time of a set after LED1 [s]
@@ -52,7 +54,7 @@ _SIGNS = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])  # LED1.
 def led_body_coordinates(b: float) -> np.ndarray:
     """Body coordinates of LED1..LED4, shape (4, 3) [m], for half side ``b`` [m]."""
     if not b > 0.0:
-        raise ValueError(f"rucksack half side b={b!r} m must be > 0")
+        raise ArgumentError(f"rucksack half side b={b!r} m must be > 0")
     u = np.zeros((4, 3))
     u[:, :2] = b * _SIGNS
     return u
@@ -112,7 +114,7 @@ class RucksackFit:
 def _check_points(points) -> np.ndarray:
     X = np.asarray(points, float)
     if X.shape[-2:] != (4, 3):
-        raise ValueError(f"LED points must have shape (..., 4, 3) [m], got {X.shape}")
+        raise ArgumentError(f"LED points must have shape (..., 4, 3) [m], got {X.shape}")
     return X
 
 
@@ -128,7 +130,7 @@ def fit_linear(points, b: float) -> RucksackFit:
     """
     X = _check_points(points)
     if not b > 0.0:
-        raise ValueError(f"rucksack half side b={b!r} m must be > 0")
+        raise ArgumentError(f"rucksack half side b={b!r} m must be > 0")
     x, y, z = X[..., 0], X[..., 1], X[..., 2]
     x1, x2, x3, x4 = (x[..., i] for i in range(4))
     y1, y2, y3, y4 = (y[..., i] for i in range(4))
@@ -254,16 +256,16 @@ def align_to_set_times(times, leds, points, common_times=None, *, half_side: flo
     led = np.asarray(leds)
     X = np.asarray(points, float)
     if t.ndim != 1 or led.shape != t.shape or X.shape != t.shape + (3,):
-        raise ValueError("times (M,), leds (M,) and points (M, 3) must agree in length")
+        raise ArgumentError("times (M,), leds (M,) and points (M, 3) must agree in length")
     if np.any(np.diff(t) < 0):
-        raise ValueError("times must be non-decreasing")
+        raise ArgumentError("times must be non-decreasing")
     bad = ~np.isin(led, (1, 2, 3, 4))
     if np.any(bad):
-        raise ValueError(f"LED number {int(led[bad][0])} is not one of 1, 2, 3, 4")
+        raise ArgumentError(f"LED number {int(led[bad][0])} is not one of 1, 2, 3, 4")
     if common_times is None:
         first = t[led == 1]
         if first.size == 0:
-            raise ValueError("no LED1 detection: cannot place the set times; pass common_times")
+            raise ArgumentError("no LED1 detection: cannot place the set times; pass common_times")
         n = int(np.floor((t[-1] - first[0]) / SET_PERIOD)) + 1
         common_times = set_times(first[0], n)
     tc = np.asarray(common_times, float)
@@ -318,7 +320,7 @@ def group_sets(times, leds, points, common_times=None):
     X = np.asarray(points, float)
     first = t[led == 1]
     if first.size == 0:
-        raise ValueError("no LED1 detection")
+        raise ArgumentError("no LED1 detection")
     if common_times is None:
         n = int(np.floor((t[-1] - first[0]) / SET_PERIOD)) + 1
         common_times = set_times(first[0], n)

@@ -51,11 +51,13 @@ from pathlib import Path
 from .axis_map import AxisMap
 from .filters import DEFAULT_CUTOFF, SoftLimit, soft_limit_for_areas
 from .triangulate import DEFAULT_MAX_RESIDUAL_PX
+from marionette.errors import ArgumentError, MarionetteError
+from marionette.textfile import read_text
 
 FITS = ("linear", "nonlinear")
 
 
-class SettingsError(ValueError):
+class SettingsError(MarionetteError, ValueError):
     """Invalid teach settings; the message names the file and key."""
 
 
@@ -139,7 +141,7 @@ def settings_from_dict(data: dict, source: str = "<memory>") -> TeachSettings:
         settings = TeachSettings(**values, source=source)
         if "map" in data:
             if not isinstance(data["map"], dict):
-                raise ValueError("[map] must be a table")
+                raise ArgumentError("[map] must be a table")
             settings.axis_map = AxisMap.from_dict(data["map"])
         settings.compress(0)                       # checks the area keys
     except (ValueError, TypeError) as exc:
@@ -151,8 +153,7 @@ def load_settings(path=None) -> TeachSettings:
     """Read teach settings; None gives the bundled settings for the bundled figure."""
     path = default_settings_path() if path is None else Path(path)
     try:
-        with open(path, "rb") as fh:
-            data = tomllib.load(fh)
+        data = tomllib.loads(read_text(path, SettingsError))
     except FileNotFoundError:
         raise SettingsError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:

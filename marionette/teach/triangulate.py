@@ -27,6 +27,7 @@ from typing import Sequence
 import numpy as np
 
 from .camera import CameraParams, homogeneous_matrix, pixel_to_ideal
+from marionette.errors import ArgumentError
 
 DEFAULT_MAX_RESIDUAL_PX = 3.0   # flag points whose rms reprojection error exceeds this [pixel]
 DEFAULT_MAX_CONDITION = 1e8     # refuse near-parallel view lines: cond(M^T M) limit [1]
@@ -85,7 +86,7 @@ def triangulate(
     if single:
         pix = pix[:, None, :]
     if pix.ndim != 3 or pix.shape[-1] != 2 or pix.shape[0] != len(cameras):
-        raise ValueError(
+        raise ArgumentError(
             f"pixels must have shape (K={len(cameras)}, N, 2) [pixel], got {np.shape(pixels)}"
         )
     K, N = pix.shape[0], pix.shape[1]

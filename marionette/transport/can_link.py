@@ -32,10 +32,12 @@ class CanLink:
                 # the tick writes to the socket itself: the receive thread must
                 # see those SYNCs to unwrap the 8-bit ticks of the statuses
                 bus_kwargs.setdefault("receive_own_messages", True)
+            where = f"can:{bus_kwargs.get('interface')}:{bus_kwargs.get('channel')}" + (
+                f"@{bus_kwargs['bitrate']}" if "bitrate" in bus_kwargs else "")
             try:
                 bus = can.Bus(**bus_kwargs)
             except (can.CanError, OSError, ValueError, ImportError) as exc:
-                raise OSError(f"CAN link {bus_kwargs}: {exc}") from None
+                raise OSError(f"CAN link {where}: {exc}") from None
         self.bus = bus
         self.monitor: NodeMonitor | None = None
         self.decoder = protocol.CanDecoder()    # also fed our own SYNCs: it unwraps STATUS ticks

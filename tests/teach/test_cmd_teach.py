@@ -58,6 +58,7 @@ def test_unshaped_show_matches_the_ground_truth(taught, tmp_path):
     result = _teach(taught, out, "--no-shape", music=short)
     assert result.returncode == 0, result.stderr
     assert "shaping: skipped" in result.stdout
+    assert f"warning: taught music {short} is 5.00 s long" in result.stderr and "truncated?" in result.stderr
     config = load_config()
     show = load_show(out, config)
     t = np.arange(show.n_ticks) * show.tick_period
@@ -180,11 +181,11 @@ def test_errors_name_file_line_and_value(taught, tmp_path):
     result = teach(bad)
     assert result.returncode == 2 and f"{bad}: no detections" in result.stderr
     result = teach(tmp_path / "none.csv")
-    assert result.returncode == 2 and f"{tmp_path / 'none.csv'}: no such file (recording)" in result.stderr
+    assert result.returncode == 2 and f"argument recording: {tmp_path / 'none.csv'}: no such file" in result.stderr
     result = teach(d / "recording.csv", cameras=tmp_path / "none.toml")
     assert result.returncode == 2 and f"{tmp_path / 'none.toml'}: no such file" in result.stderr
     result = teach(d / "recording.csv", music=tmp_path / "none.wav")
-    assert result.returncode == 2 and f"{tmp_path / 'none.wav'}: no such file (music)" in result.stderr
+    assert result.returncode == 2 and f"argument --music: {tmp_path / 'none.wav'}: no such file" in result.stderr
     cams = tmp_path / "cams.toml"
     cams.write_text(taught.cameras.read_text().replace("L = ", "L = -", 1))
     result = teach(d / "recording.csv", cameras=cams)
@@ -192,3 +193,14 @@ def test_errors_name_file_line_and_value(taught, tmp_path):
     result = teach(d / "recording.csv", output=tmp_path / "show.csv")
     assert result.returncode == 2 and "teach writes an .npz show" in result.stderr
     assert not out.exists()
+
+
+def test_silent_music_is_warned_about(taught, tmp_path):
+    silent = tmp_path / "silent.wav"
+    rate = taught.sample.sample_rate
+    write_wav(silent, np.zeros(len(taught.sample.music)), rate)
+    result = _teach(taught, tmp_path / "s.npz", "--no-shape", music=silent)
+    assert result.returncode == 0, result.stderr
+    assert f"warning: taught music {silent} is silent" in result.stderr
+    assert "truncated" not in result.stderr
+

@@ -63,5 +63,6 @@ def test_bundled_sample_runs_calibrate_teach_play(tmp_path):
     assert result.returncode == 0, result.stderr
     assert "2250 ticks" in result.stdout and "0 dropped" in result.stdout
     # --sample and explicit files do not mix
+    (tmp_path / "r.csv").write_text("")
     result = run_cli("teach", "--sample", str(tmp_path / "r.csv"), "--cameras", cameras, "-o", show)
     assert result.returncode == 2 and "not both" in result.stderr

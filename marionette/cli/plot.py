@@ -12,32 +12,30 @@ from pathlib import Path
 
 import numpy as np
 
+from marionette.cli.options import Number, image_file, input_file
 from marionette.errors import ShowError, TeachError
+from marionette.npzfile import read_npz
 from marionette.show import load_show
 
+DPI = Number(int, 10, 1200)        # [dots per inch]
 COLOURS = ("tab:red", "tab:orange", "tab:olive", "tab:green", "tab:cyan", "tab:blue", "tab:purple")
 
 
 def read_stages(path: Path) -> dict:
     """Stage arrays of a taught .npz: names, labels, times and (axes, samples) values."""
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if "stage_names" not in z.files:
-                raise TeachError(f"{path}: no filter stages in this show (only shows written by "
-                                 "`marionette teach` have them)")
-            names = [str(n) for n in z["stage_names"]]
-            out = {"names": names, "labels": [str(s) for s in z["stage_labels"]],
-                   "bases": [str(s) for s in z["stage_bases"]],
-                   "set": np.array(z["stage_set_times"]), "tick": np.array(z["stage_tick_times"])}
-            missing = [f"stage_{n}" for n in names if f"stage_{n}" not in z.files]
-            if missing:
-                raise TeachError(f"{path}: stage array {missing[0]!r} is missing")
-            out["values"] = {n: np.array(z[f"stage_{n}"]) for n in names}
-    except (OSError, ValueError) as exc:
-        if isinstance(exc, TeachError):
-            raise
-        raise TeachError(f"{path}: not a readable .npz show: {exc}") from None
-    return out
+    z = read_npz(path, TeachError)
+    if "stage_names" not in z:
+        raise TeachError(f"{path}: no filter stages in this show (only shows written by "
+                         "`marionette teach` have them)")
+    names = [str(n) for n in z["stage_names"]]
+    wanted = ["stage_labels", "stage_bases", "stage_set_times", "stage_tick_times"]
+    missing = [k for k in wanted + [f"stage_{n}" for n in names] if k not in z]
+    if missing:
+        raise TeachError(f"{path}: stage array {missing[0]!r} is missing")
+    return {"names": names, "labels": [str(s) for s in z["stage_labels"]],
+            "bases": [str(s) for s in z["stage_bases"]],
+            "set": z["stage_set_times"], "tick": z["stage_tick_times"],
+            "values": {n: z[f"stage_{n}"] for n in names}}
 
 
 def run(args) -> int:
@@ -93,8 +91,10 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("plot", help="plot the filter stages of one axis of a taught show",
                               description="Plot the filter stages of one axis of a show written by "
                               "`marionette teach`, one above the other (docs/teach.md).")
-    p.add_argument("show", help="show written by `marionette teach` (.npz)")
+    p.add_argument("show", type=input_file, help="show written by `marionette teach` (.npz)")
     p.add_argument("--axis", required=True, help="axis name, as in the figure")
-    p.add_argument("-o", "--output", required=True, help="image to write (.png, .pdf, .svg)")
-    p.add_argument("--dpi", type=int, default=100, help="resolution of raster images (default 100)")
+    p.add_argument("-o", "--output", required=True, type=image_file,
+                   help="image to write (.png, .pdf, .svg, ...)")
+    p.add_argument("--dpi", type=DPI, default=100,
+                   help=f"resolution of raster images, {DPI.range} (default 100)")
     p.set_defaults(run=run)

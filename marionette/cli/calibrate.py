@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from marionette.cli.options import Number, input_file, output_file
 from marionette.errors import TeachError
 from marionette.teach.calibration import MIN_MARKERS, calibrate
 from marionette.teach.camera import IDEAL_PARAMETER_NAMES, PARAMETER_NAMES, UNITS
@@ -72,8 +73,6 @@ def run(args) -> int:
     if not args.markers:
         raise TeachError("no marker file: give MARKERS.csv (or --sample for the bundled one)")
     path = Path(args.markers)
-    if not path.exists():
-        raise TeachError(f"{path}: no such file")
     try:
         markers = read_markers(path)
     except ValueError as exc:
@@ -82,8 +81,6 @@ def run(args) -> int:
         if len(cm.names) < MIN_MARKERS:
             raise TeachError(f"{path}: camera {k}: calibration needs at least {MIN_MARKERS} "
                              f"markers, the file has {len(cm.names)} ({', '.join(cm.names)})")
-    if args.max_iter is not None and args.max_iter < 1:
-        raise TeachError(f"--max-iter {args.max_iter}: must be at least 1")
     size = image_size(args.image_size)
     guesses, guess_kind = _guesses(args, markers, size)
     method = SOLVERS[args.solver]
@@ -138,8 +135,10 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("calibrate", help="identify the cameras from known markers (teach-in)",
                               description="Identify the cameras from known markers and write "
                               "cameras.toml for `marionette teach` (docs/teach.md).")
-    p.add_argument("markers", nargs="?", help="marker file (CSV: camera,marker,x,y,z,R,T)")
-    p.add_argument("-o", "--output", required=True, help="cameras file to write (TOML)")
+    p.add_argument("markers", nargs="?", type=input_file,
+                   help="marker file (CSV: camera,marker,x,y,z,R,T)")
+    p.add_argument("-o", "--output", required=True, type=output_file,
+                   help="cameras file to write (TOML)")
     p.add_argument("--sample", action="store_true", help="use the bundled sample's markers")
     p.add_argument("--solver", choices=sorted(SOLVERS), default="lm",
                    help="lm: Levenberg-Marquardt (default, fast); steepest-descent: the paper's "
@@ -151,8 +150,10 @@ def register(subparsers) -> None:
                    help="minimise the paper's eq. 4.8 error [m] or the reprojection error [pixel]")
     p.add_argument("--image-size", default="512x512",
                    help="sensor COLUMNSxROWS [pixel]; the optical axis is its centre (default 512x512)")
-    p.add_argument("--guess", help="starting cameras (cameras.toml format; angles or target = "
-                                   "[x, y, z]); default: found linearly from the markers")
-    p.add_argument("--max-iter", type=int, help="iteration limit (default 200 for lm, 20000 for "
-                                                "steepest-descent)")
+    p.add_argument("--guess", type=input_file,
+                   help="starting cameras (cameras.toml format; angles or target = "
+                        "[x, y, z]); default: found linearly from the markers")
+    p.add_argument("--max-iter", type=Number(int, 1),
+                   help="iteration limit (default 200 for lm, 20000 for "
+                        "steepest-descent)")
     p.set_defaults(run=run)

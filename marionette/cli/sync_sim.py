@@ -27,16 +27,19 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import math
 from pathlib import Path
 
 import numpy as np
 
+from marionette.cli.options import input_file, output_file
 from marionette.config import FOLLOW_MODES, load_config
 from marionette.errors import MarionetteError
 from marionette.music.feature import wav_frames, wav_loudness
 from marionette.music.follower import DEFAULT_START, STATES, Follower, cue_ticks, sync_ticks
 from marionette.show import load_show
+from marionette.textfile import read_text
 
 
 class SyncSimError(MarionetteError, ValueError):
@@ -47,32 +50,31 @@ def read_truth(path) -> dict[int, float]:
     """tick -> position_s [s] from a CSV with the header tick,position_s."""
     path = Path(path)
     try:
-        f = open(path, newline="")
+        text = read_text(path, SyncSimError)
     except FileNotFoundError:
         raise SyncSimError(f"{path}: no such truth file") from None
     truth: dict[int, float] = {}
-    with f:
-        rows = csv.reader(f)
-        header = next(rows, None)
-        if header is None or [h.strip() for h in header[:2]] != ["tick", "position_s"]:
-            raise SyncSimError(f"{path}:1: expected the header 'tick,position_s', found {header!r}")
-        for line, row in enumerate(rows, start=2):
-            if not row or not "".join(row).strip():
-                continue
-            if len(row) < 2:
-                raise SyncSimError(f"{path}:{line}: expected 'tick,position_s', found {','.join(row)!r}")
-            try:
-                tick = int(row[0])
-            except ValueError:
-                raise SyncSimError(f"{path}:{line}: tick {row[0]!r} is not an integer") from None
-            try:
-                pos = float(row[1])
-            except ValueError:
-                raise SyncSimError(f"{path}:{line}: position_s {row[1]!r} is not a number") from None
-            if tick < 0 or not math.isfinite(pos):
-                raise SyncSimError(f"{path}:{line}: tick {tick} / position_s {pos!r}: the tick must "
-                                   "be >= 0 and the position finite")
-            truth[tick] = pos
+    rows = csv.reader(io.StringIO(text, newline=""))
+    header = next(rows, None)
+    if header is None or [h.strip() for h in header[:2]] != ["tick", "position_s"]:
+        raise SyncSimError(f"{path}:1: expected the header 'tick,position_s', found {header!r}")
+    for line, row in enumerate(rows, start=2):
+        if not row or not "".join(row).strip():
+            continue
+        if len(row) < 2:
+            raise SyncSimError(f"{path}:{line}: expected 'tick,position_s', found {','.join(row)!r}")
+        try:
+            tick = int(row[0])
+        except ValueError:
+            raise SyncSimError(f"{path}:{line}: tick {row[0]!r} is not an integer") from None
+        try:
+            pos = float(row[1])
+        except ValueError:
+            raise SyncSimError(f"{path}:{line}: position_s {row[1]!r} is not a number") from None
+        if tick < 0 or not math.isfinite(pos):
+            raise SyncSimError(f"{path}:{line}: tick {tick} / position_s {pos!r}: the tick must "
+                               "be >= 0 and the position finite")
+        truth[tick] = pos
     if not truth:
         raise SyncSimError(f"{path}: no rows")
     return truth
@@ -191,16 +193,24 @@ def add_start_argument(p) -> None:
 
 
 def register(sub) -> None:
-    p = sub.add_parser("sync-sim", help="follow a live recording against a taught one, offline")
-    p.add_argument("--taught", required=True,
+    p = sub.add_parser("sync-sim", help="follow a live recording against a taught one, offline",
+                       description="Run the music follower offline, tick by tick as at the show, "
+                       "over a taught recording (or a show's stored loudness) and a live one; "
+                       "write the track (where in the taught music the live music is, per tick) "
+                       "and, with --truth, print its accuracy (docs/music.md).")
+    p.add_argument("--taught", required=True, type=input_file,
                    help="the music as taught (WAV), or a show (.npz, .csv) whose stored loudness "
                         "the engine would follow")
-    p.add_argument("--live", required=True, help="the music as played at the show (WAV)")
-    p.add_argument("--out", required=True, help="track to write (CSV, one row per tick)")
+    p.add_argument("--live", required=True, type=input_file,
+                   help="the music as played at the show (WAV)")
+    p.add_argument("--out", required=True, type=output_file,
+                   help="track to write (CSV, one row per tick)")
     p.add_argument("--mode", choices=FOLLOW_MODES, default="smooth",
                    help="smooth (fractional rate, default) or paper (double or skip a sample)")
-    p.add_argument("--truth", help="CSV tick,position_s: print the accuracy against it")
-    p.add_argument("--config", help="figure TOML for the tick period and [follow] settings")
+    p.add_argument("--truth", type=input_file,
+                   help="CSV tick,position_s: print the accuracy against it")
+    p.add_argument("--config", type=input_file,
+                   help="figure TOML for the tick period and [follow] settings")
     add_start_argument(p)
     p.add_argument("--loudness-only", action="store_true",
                    help="live frames without onsets, as servo nodes send them (LOUDNESS)")

@@ -18,10 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
+from marionette.cli.options import ACCEL_FRACTION, CONFIG_HELP, Number, input_file, output_file
 from marionette.config import load_config
-from marionette.errors import TeachError
+from marionette.errors import ArgumentError, TeachError
 from marionette.music.bands import wav_bands
 from marionette.music.feature import wav_frames
+from marionette.music.report import TAUGHT_SHORT_SHARE, recording_warnings
 from marionette.progress import Progress
 from marionette.shape import POLICIES, shape_show
 from marionette.show import LIMIT_POLICIES, Show, fit_to_figure
@@ -69,11 +71,6 @@ def _check_inputs(args) -> None:
         raise TeachError("no recording: give RECORDING.csv (or --sample for the bundled one)")
     if not args.music:
         raise TeachError("no music: give --music MUSIC.wav (its loudness is stored in the show)")
-    for what, path in (("recording", args.recording), ("music", args.music)):
-        if not Path(path).exists():
-            raise TeachError(f"{path}: no such file ({what})")
-    if not 0.0 < args.accel_fraction <= 1.0:
-        raise TeachError(f"--accel-fraction {args.accel_fraction!r}: must be in (0, 1]")
     if Path(args.output).suffix != ".npz":
         raise TeachError(f"{args.output}: teach writes an .npz show (the filter stages for "
                          "`marionette plot` need it); `marionette shape` or Show.save convert")
@@ -160,6 +157,9 @@ def _teach(args, progress: Progress) -> int:
     band_rows = wav_bands(args.music, period=config.tick_period)
     show.bands = np.concatenate([band_rows[:n], np.zeros((max(0, n - len(band_rows)), band_rows.shape[1]))])
 
+    warnings = recording_warnings(args.music, loud, config.tick_period, show.duration, 0.0,
+                                  kind="taught music", short_share=TAUGHT_SHORT_SHARE)
+
     progress.step("writing")
     extra = {"stage_names": np.array([k for k, _, _ in STAGES]),
              "stage_bases": np.array([b for _, b, _ in STAGES]),
@@ -171,6 +171,8 @@ def _teach(args, progress: Progress) -> int:
     progress.done()
 
     _report(args, config, settings, stages, show, report, untaught, music_frames)
+    for line in warnings:           # after the report, where they are seen
+        print(line, file=sys.stderr)
     return 0
 
 
@@ -204,7 +206,7 @@ def save_with_extras(show: Show, path, extra: dict) -> None:
         arrays = {k: z[k] for k in z.files}
     clash = set(arrays) & set(extra)
     if clash:
-        raise ValueError(f"extra arrays {sorted(clash)} would replace show arrays")
+        raise ArgumentError(f"extra arrays {sorted(clash)} would replace show arrays")
     arrays.update(extra)
     np.savez_compressed(path, **arrays)
 
@@ -257,26 +259,32 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("teach", help="recording of the dancer -> show for the figure (teach-in)",
                               description="Turn a recording of the dancer's LEDs into a show for the "
                               "figure, with the music's loudness (docs/teach.md).")
-    p.add_argument("recording", nargs="?", help="recording of LED detections (CSV: time_s,camera,led,R,T)")
-    p.add_argument("--cameras", required=True, help="cameras file written by `marionette calibrate`")
-    p.add_argument("--music", help="the music the dancer danced to (WAV); its loudness goes into the show")
-    p.add_argument("-o", "--output", required=True, help="show to write (.npz)")
-    p.add_argument("--sample", action="store_true",
-                   help="use the bundled sample's recording and music")
-    p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
-    p.add_argument("--settings", help="teach settings TOML (rucksack, filters, areas, axis map); "
-                                      "default: the bundled one for the bundled figure")
+    p.add_argument("recording", nargs="?", type=input_file,
+                   help="recording of LED detections (CSV: time_s,camera,led,R,T)")
+    p.add_argument("--cameras", required=True, type=input_file,
+                   help="cameras file written by `marionette calibrate`")
+    music = p.add_mutually_exclusive_group(required=True)
+    music.add_argument("--music", metavar="MUSIC.wav", type=input_file,
+                       help="the music the dancer danced to (WAV); its loudness goes into the show")
+    music.add_argument("--sample", action="store_true",
+                       help="use the bundled sample's recording and music (instead of RECORDING "
+                            "and --music)")
+    p.add_argument("-o", "--output", required=True, type=output_file, help="show to write (.npz)")
+    p.add_argument("--config", type=input_file, help=CONFIG_HELP)
+    p.add_argument("--settings", type=input_file,
+                   help="teach settings TOML (rucksack, filters, areas, axis map); "
+                        "default: the bundled one for the bundled figure")
     p.add_argument("--policy", choices=POLICIES, default="reduce",
                    help="pragmatic filter, infeasible moves: reduce the excursion (default), "
                         "borrow time from the preceding rest, or reject (error)")
-    p.add_argument("--accel-fraction", type=float, default=1.0,
-                   help="plan the moves to this fraction of each top acceleration (0 < f <= 1)")
+    p.add_argument("--accel-fraction", type=ACCEL_FRACTION, default=1.0,
+                   help=f"plan the moves to this fraction of each top acceleration, {ACCEL_FRACTION.range}")
     p.add_argument("--lag-headroom", action="store_true",
                    help="plan the speed to leave room for the lag feed-forward (as `marionette shape`)")
     p.add_argument("--no-shape", action="store_true", help="skip the pragmatic filter")
     p.add_argument("--on-limits", choices=LIMIT_POLICIES, default="error",
                    help="taught positions outside an axis's limits: error (default), clamp, compress")
-    p.add_argument("--list-infeasible", type=int, default=5, metavar="N",
+    p.add_argument("--list-infeasible", type=Number(int, 0), default=5, metavar="N",
                    help="list at most N infeasible moves (default 5)")
     p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(run=run)

@@ -1,51 +1,82 @@
-"""The ``marionette`` command.
-
-    marionette play [SHOW] [--config FIGURE.toml] [--realtime] [--link ...] [--music ...]
-    marionette check | shape | calibrate | teach | plot | sim | sync-sim | log ...
-    marionette bench tick|jitter|moves|fuzz|link|sync|bands [...]
-"""
+"""``marionette play [SHOW]``: play a show through the engine, in step mode
+or in real time, to a file, a link to the servo nodes or nowhere, following
+live music or not, and print a summary."""
 from __future__ import annotations
 
 import argparse
-import importlib
 import os
 import sys
 from dataclasses import replace
 
 import numpy as np
 
-from marionette.cmd_sync_sim import add_start_argument
-from marionette.config import load_config
-from marionette.console import open_view
-from marionette.demo import DEMO_SHOW
 from marionette._core import FLAG_END
-from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
+from marionette.cli.options import (PRIORITY, Number, figure_and_show, figure_args, input_file,
+                                    output_file)
+from marionette.cli.sync_sim import add_start_argument
+from marionette.console import open_view
+from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, MAX_RATE, Engine
 from marionette.errors import MarionetteError
 from marionette.faults import FaultWatcher, summary as fault_summary
 from marionette.music.report import (LostWatcher, choose_latency, follow_share, lost_events,
                                      never_locked_warning, recording_warnings, share_line,
                                      verdict_line)
-from marionette.show import LIMIT_POLICIES, load_show
 
-BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync", "bands")
-# commands that live in their own modules (marionette/cmd_<name>.py, each with
-# register(subparsers) setting run=...)
-COMMAND_MODULES = ("calibrate", "teach", "plot", "sim", "sync_sim", "log", "demo")
+TICKS = Number(int, 1)
+RATE = Number(float, 0.0, MAX_RATE)
+CPU = Number(int, 0, (os.cpu_count() or 1) - 1)
 
 
-def _figure_and_show(args):
-    config = load_config(args.config)
-    show = load_show(args.show or DEMO_SHOW, config, on_limits=args.on_limits)
-    return config, show
-
-
-def cmd_check(args) -> int:
-    config, show = _figure_and_show(args)
-    print(f"{config.source}: {config.name}, {len(config.axes)} axes, tick {config.tick_period * 1e3:g} ms")
-    print(f"{show.path}: {show.n_ticks} ticks ({show.duration:.2f} s), music {show.music or '-'}")
-    for change in show.changes:
-        print(f"  changed: {change}")
-    return 0
+def register(sub) -> None:
+    p = sub.add_parser("play", help="play a show through the engine and print a summary",
+                       description="Play a show through the engine: in step mode (on a virtual "
+                       "clock, as fast as the CPU allows) or in real time; to servo nodes (--link), "
+                       "a file (--output) or nowhere; following live music (--music, "
+                       "--audio-device) or not. Prints a summary; a flight record with --record.")
+    figure_args(p)
+    p.add_argument("--realtime", action="store_true",
+                   help="run the real-time loop (default: step mode)")
+    p.add_argument("--headless", action="store_true",
+                   help="no live console: in real time one status line per second on stderr "
+                        "(also whenever stdout is not a terminal; docs/console.md)")
+    p.add_argument("--json", action="store_true", help="the status lines as JSON lines (headless)")
+    p.add_argument("--ticks", type=TICKS,
+                   help=f"ticks to run, {TICKS.range} (default: the whole show)")
+    p.add_argument("--rate", type=RATE, default=1.0,
+                   help=f"playback rate [show ticks per tick], {RATE.range} (default 1: as taught)")
+    p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag",
+                   help="how far ahead each servo is sent its setpoint: dead_time_lag (default): "
+                        "x(t + Td) + tau x'(t + Td), which cancels the dead time and the lag; "
+                        "mean_delay: x(t + Td + tau), the paper's; none: x(t)")
+    p.add_argument("--interpolation", choices=sorted(INTERPOLATIONS), default="cubic",
+                   help="between the show's ticks: cubic (Catmull-Rom, default) or linear")
+    p.add_argument("--priority", type=PRIORITY, default=80,
+                   help=f"SCHED_FIFO priority {PRIORITY.range} (0: normal; default 80)")
+    p.add_argument("--cpu", type=CPU, help=f"pin the real-time thread to this CPU, {CPU.range}")
+    p.add_argument("--lock-memory", action=argparse.BooleanOptionalAction, default=True,
+                   help="mlockall before starting the real-time loop (default; a warning, "
+                        "not a failure, when not permitted)")
+    p.add_argument("--end", choices=("hold", "home", "none"), default="hold",
+                   help="at the end of a real-time show on a --link: come to rest and hold "
+                        "(default), or a limited move home; then the nodes are told, so no "
+                        "watchdog trips ('none': stop sending, the watchdogs stop the figure)")
+    p.add_argument("--record", type=output_file, help="write the flight record to this file")
+    p.add_argument("--output", type=output_file,
+                   help="write the setpoint frames to this file or device")
+    p.add_argument("--link", help="send to servo nodes: serial:URL[@BAUD] or "
+                                  "can:INTERFACE:CHANNEL[@BITRATE] (see 'marionette sim')")
+    p.add_argument("--follow", choices=("smooth", "paper"),
+                   help="follow the live music (default mode with --music or --audio-device: "
+                        "the figure's [follow] table)")
+    p.add_argument("--music", type=input_file,
+                   help="the live music from this recording, played back as if live "
+                        "(a silent or short one, or one never locked on, is warned about)")
+    add_start_argument(p)
+    p.add_argument("--audio-device", nargs="?", const="",
+                   help="the live music from this sound card input (its index or a part of its "
+                        "name, as listed when unknown; no value: the first input); needs the "
+                        "'audio' extra. A lost input is reported at once and the exit status is 1")
+    p.set_defaults(run=run)
 
 
 def _recording_source(args, config):
@@ -78,8 +109,8 @@ def _open_audio(args, engine_box: list):
     return audio.start()
 
 
-def cmd_play(args) -> int:
-    config, show = _figure_and_show(args)
+def run(args) -> int:
+    config, show = figure_and_show(args)
     period = config.tick_period                                         # [s]
     output = None
     if args.output and args.link:
@@ -99,7 +130,10 @@ def cmd_play(args) -> int:
         for line in recording_warnings(args.music, live.loudness, period, show.duration, args.start):
             print(line, file=sys.stderr, flush=True)
     if args.output:
-        output = os.open(args.output, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
+        try:
+            output = os.open(args.output, os.O_WRONLY | os.O_CREAT | os.O_NONBLOCK, 0o644)
+        except OSError as exc:
+            raise MarionetteError(f"--output {args.output}: cannot open it: {exc.strerror}") from None
     elif args.link:
         from marionette.transport import open_link
         output = open_link(args.link)
@@ -222,120 +256,3 @@ def cmd_play(args) -> int:
         print(verdict)
         status = 1
     return status or view.status
-
-
-def cmd_shape(args) -> int:
-    from marionette.shape import shape_show
-    config = load_config(args.config)
-    show = load_show(args.show, config)
-    shaped, report = shape_show(show, config, policy=args.policy, prominence=args.prominence,
-                                rest_tolerance=args.rest_tolerance,
-                                accel_fraction=args.accel_fraction, lag_headroom=args.lag_headroom)
-    shaped.save(args.output)
-    print(report)
-    print(f"wrote {args.output}")
-    return 0
-
-
-def cmd_bench(args, rest: list[str]) -> int:
-    module = importlib.import_module(f"marionette.bench.{args.bench}")
-    return module.main(rest)
-
-
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="marionette", description=__doc__.split("\n\n")[0])
-    sub = parser.add_subparsers(dest="command", required=True)
-
-    def figure_args(p):
-        p.add_argument("show", nargs="?", help="show file (.csv or .npz); default: the bundled demo")
-        p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
-        p.add_argument("--on-limits", choices=LIMIT_POLICIES, default="error",
-                       help="what to do with taught positions outside an axis's limits")
-
-    p = sub.add_parser("play", help="play a show through the engine and print a summary")
-    figure_args(p)
-    p.add_argument("--realtime", action="store_true", help="run the real-time loop (default: step mode)")
-    p.add_argument("--headless", action="store_true",
-                   help="no live console: in real time one status line per second on stderr "
-                        "(also whenever stdout is not a terminal; docs/console.md)")
-    p.add_argument("--json", action="store_true", help="the status lines as JSON lines (headless)")
-    p.add_argument("--ticks", type=int, help="ticks to run (default: the whole show)")
-    p.add_argument("--rate", type=float, default=1.0, help="playback rate [show ticks per tick]")
-    p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag")
-    p.add_argument("--interpolation", choices=sorted(INTERPOLATIONS), default="cubic")
-    p.add_argument("--priority", type=int, default=80, help="SCHED_FIFO priority (0: normal)")
-    p.add_argument("--cpu", type=int, help="pin the real-time thread to this CPU")
-    p.add_argument("--lock-memory", action=argparse.BooleanOptionalAction, default=True,
-                   help="mlockall before starting the real-time loop (default; a warning, "
-                        "not a failure, when not permitted)")
-    p.add_argument("--end", choices=("hold", "home", "none"), default="hold",
-                   help="at the end of a real-time show on a --link: come to rest and hold "
-                        "(default), or a limited move home; then the nodes are told, so no "
-                        "watchdog trips ('none': stop sending, the watchdogs stop the figure)")
-    p.add_argument("--record", help="write the flight record to this file")
-    p.add_argument("--output", help="write the setpoint frames to this file or device")
-    p.add_argument("--link", help="send to servo nodes: serial:URL[@BAUD] or "
-                                  "can:INTERFACE:CHANNEL[@BITRATE] (see 'marionette sim')")
-    p.add_argument("--follow", choices=("smooth", "paper"),
-                   help="follow the live music (default mode with --music or --audio-device: "
-                        "the figure's [follow] table)")
-    p.add_argument("--music", help="the live music from this recording, played back as if live "
-                                   "(a silent or short one, or one never locked on, is warned about)")
-    add_start_argument(p)
-    p.add_argument("--audio-device", nargs="?", const="",
-                   help="the live music from this sound card input (its index or a part of its "
-                        "name, as listed when unknown; no value: the first input); needs the "
-                        "'audio' extra. A lost input is reported at once and the exit status is 1")
-    p.set_defaults(run=cmd_play)
-
-    p = sub.add_parser("check", help="validate a figure and a show")
-    figure_args(p)
-    p.set_defaults(run=cmd_check)
-
-    p = sub.add_parser("shape", help="join the points of rest by timed parabolic moves (offline)")
-    p.add_argument("show", help="taught show file (.csv or .npz)")
-    p.add_argument("-o", "--output", required=True, help="shaped show to write (.csv or .npz)")
-    p.add_argument("--config", help="figure TOML; default: the bundled Hoffmann 1996 figure")
-    p.add_argument("--policy", choices=("reduce", "borrow", "reject"), default="reduce",
-                   help="infeasible moves: reduce the excursion, borrow time from the "
-                        "preceding rest, or reject (exit 2)")
-    p.add_argument("--prominence", type=float,
-                   help="smallest excursion counted as a point of rest [axis unit] "
-                        "(default: 2 %% of each axis's range)")
-    p.add_argument("--rest-tolerance", type=float,
-                   help="rest band around an extremum [axis unit] (default: 0.5 %% of the range)")
-    p.add_argument("--accel-fraction", type=float, default=1.0,
-                   help="plan the moves to this fraction of each top acceleration (0 < f <= 1)")
-    p.add_argument("--lag-headroom", action="store_true",
-                   help="plan the speed to leave room for the lag feed-forward of lead "
-                        "dead_time_lag (top speed - time_constant * acceleration)")
-    p.set_defaults(run=cmd_shape)
-
-    for name in COMMAND_MODULES:
-        importlib.import_module(f"marionette.cmd_{name}").register(sub)
-
-    p = sub.add_parser("bench", help="benchmarks: " + ", ".join(BENCHES), add_help=False)
-    p.add_argument("bench", choices=BENCHES)
-    return parser
-
-
-def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    parser = build_parser()
-    args, rest = parser.parse_known_args(argv)
-    try:
-        if args.command == "bench":
-            return cmd_bench(args, rest)
-        if rest:
-            parser.error(f"unrecognized arguments: {' '.join(rest)}")
-        return args.run(args)
-    except MarionetteError as exc:
-        print(f"marionette: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:      # outside a show (a show's own Ctrl-C: marionette.console)
-        print("marionette: interrupted", file=sys.stderr)
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())

@@ -26,6 +26,7 @@ import threading
 import time
 from pathlib import Path
 
+from marionette.cli.options import Number
 from marionette.errors import MarionetteError
 
 DEFAULT_DURATION = 20.0  # [s] of show: the intro, a verse and into the chorus; CI runs it
@@ -40,14 +41,14 @@ def register(sub) -> None:
     p = sub.add_parser("demo", help="teach the bundled sample, play it on simulated servo nodes "
                                     "with its music under the live console, print the summaries",
                        description=__doc__.split("\n\n")[1].replace("\n", " "))
-    p.add_argument("--duration", type=float, default=DEFAULT_DURATION,
+    p.add_argument("--duration", type=Number(float, 0.0, above=True), default=DEFAULT_DURATION,
                    help=f"seconds of show to play (default {DEFAULT_DURATION:g}; the sample's "
                         "whole song: 45)")
     p.add_argument("--headless", action="store_true",
                    help="no live console: one status line per second on stderr (also whenever "
                         "stdout is not a terminal)")
     p.add_argument("--json", action="store_true", help="the status lines as JSON lines (headless)")
-    p.set_defaults(run=cmd_demo)
+    p.set_defaults(run=run)
 
 
 def teach_sample(directory: Path) -> Path:
@@ -173,7 +174,7 @@ def _terminated(signum, frame):
     raise SystemExit(128 + signum)        # 143: the finally clauses stop the simulator
 
 
-def cmd_demo(args) -> int:
+def run(args) -> int:
     if threading.current_thread() is not threading.main_thread():
         return _demo(args)
     old = signal.signal(signal.SIGTERM, _terminated)  # play's view takes it over during the show
@@ -184,11 +185,9 @@ def cmd_demo(args) -> int:
 
 
 def _demo(args) -> int:
-    from marionette.cli import build_parser, cmd_play
+    from marionette.cli import build_parser, play
     from marionette.config import load_config
     from marionette.teach.make_sample import sample_path
-    if not args.duration > 0:
-        raise MarionetteError(f"--duration {args.duration!r}: must be > 0 [s]")
     period = load_config(None).tick_period                            # [s]
     ticks = max(1, round(args.duration / period))
     with tempfile.TemporaryDirectory(prefix="marionette-demo-") as tmp:
@@ -207,7 +206,7 @@ def _demo(args) -> int:
                 argv += ["--headless"] * args.headless + ["--json"] * args.json
                 print(f"demo: play --realtime --link serial:{sim.path} --music SAMPLE/music.wav "
                       f"--ticks {ticks} ({ticks * period:g} s of show)", flush=True)
-                status = cmd_play(build_parser().parse_args(argv))
+                status = play.run(build_parser().parse_args(argv))
                 time.sleep(AFTER_SHOW)
             finally:
                 if sim is not None:

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from marionette import _core
+from marionette.cli.options import image_file, input_file, output_file
 from marionette.errors import MarionetteError
 from marionette.music.follower import STATES
 from marionette.recorder import MAGIC, read_flight_record
@@ -394,13 +395,19 @@ def run(args) -> int:
     return 0
 
 
+def _plot_file(text: str) -> str:
+    """--plot's value: an image file, or none (argparse passes the empty const here too)."""
+    return image_file(text) if text else text
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser("log", help="summarize a flight record; export it as CSV, plot it",
                               description="Summarize a flight record written by `marionette play "
                               "--record` (docs/formats.md); --csv exports every tick, --plot draws it.")
-    p.add_argument("record", help="flight record (.bin) written by play --record")
-    p.add_argument("--csv", metavar="OUT.csv", help="write one row per tick, every field")
-    p.add_argument("--plot", nargs="?", const="", metavar="OUT.png",
+    p.add_argument("record", type=input_file, help="flight record (.bin) written by play --record")
+    p.add_argument("--csv", metavar="OUT.csv", type=output_file,
+                   help="write one row per tick, every field")
+    p.add_argument("--plot", nargs="?", const="", metavar="OUT.png", type=_plot_file,
                    help="draw the record (default file: the record's name with .png); needs matplotlib")
     p.add_argument("--axes", metavar="A,B", help="axes whose commands --plot draws "
                                                  "(default: the first two)")

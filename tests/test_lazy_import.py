@@ -1,0 +1,30 @@
+"""import marionette is lazy (PEP 562): the simulator process and
+firmware_protocol/tools/bus_budget.py import marionette.protocol only, and do
+not load the C engine."""
+import subprocess
+import sys
+
+import marionette
+
+
+def _modules_after(code: str) -> set[str]:
+    out = subprocess.run([sys.executable, "-c", code + "\nimport sys\n"
+                          "print(' '.join(m for m in sys.modules if m.startswith('marionette')))"],
+                         capture_output=True, text=True, timeout=60, check=True).stdout
+    return set(out.split())
+
+
+def test_protocol_alone_does_not_load_the_engine():
+    loaded = _modules_after("import marionette.protocol")
+    assert "marionette.protocol" in loaded
+    assert "marionette._core" not in loaded and "marionette.engine" not in loaded
+
+
+def test_the_public_names_load_when_used():
+    loaded = _modules_after("import marionette")
+    assert "marionette._core" not in loaded
+    loaded = _modules_after("import marionette\nassert marionette.Engine.__name__ == 'Engine'")
+    assert "marionette._core" in loaded
+    for name in marionette.__all__:
+        assert getattr(marionette, name) is not None
+    assert marionette.transport.open_link.__name__ == "open_link"     # a subpackage, by attribute
