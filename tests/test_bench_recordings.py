@@ -44,7 +44,7 @@ def test_a_folder_is_decoded_to_mono_at_the_bench_rate(loaded):
     rec = real[0]
     assert rec.sample_rate == SAMPLE_RATE and rec.samples.ndim == 1
     assert rec.duration == pytest.approx(SECONDS, abs=0.05)
-    assert "short" in note and f"{recordings.MIN_S:g} s" in note
+    assert "sub/short" in note and f"{recordings.MIN_S:g} s" in note
     # the same music as the piece synthesized at the bench's rate: the
     # loudness frames follow each other (a wrong rate or channel mix would not)
     ref = synthesize("waltz", seed=2).samples[:int(SECONDS * SAMPLE_RATE)]
@@ -65,6 +65,22 @@ def test_resample_keeps_a_tone_and_drops_what_is_above_nyquist():
     assert np.std(low) == pytest.approx(np.sqrt(0.5), rel=1e-3)
     high = recordings.resample(np.sin(2 * np.pi * 12000 * t), fs, SAMPLE_RATE)
     assert np.std(high) < 1e-3                                        # above 8 kHz: gone, not folded
+
+
+def test_names_are_paths_under_the_folder(tmp_path):
+    for album in ("b", "a"):
+        (tmp_path / album).mkdir()
+        (tmp_path / album / "track01.FLAC").write_bytes(b"")
+    (tmp_path / "cover.jpg").write_bytes(b"")
+    found = recordings.find([tmp_path])
+    assert [name for _, name in found] == ["a/track01", "b/track01"]
+
+
+def test_an_unreadable_recording_is_an_error_naming_it(tmp_path, capsys):
+    (tmp_path / "broken.ogg").write_bytes(b"OggS not really")
+    assert cli.main(["bench", "sync", "--quick", "--music-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "broken.ogg" in err and "Traceback" not in err
 
 
 def test_pick_spreads_over_the_sorted_files():

@@ -13,8 +13,8 @@ subfolders too).
 Which: the files sorted by path, then every k-th of them so that COUNT are
 taken (k = files // COUNT, at least 1): spread over the folder rather than
 the first few of one album; the same files for the same folder. Each is
-decoded (integer PCM WAV by the standard library, anything else by the
-optional `soundfile` package: the ``bench`` extra), mixed to mono, cut to
+decoded by the optional `soundfile` package (the ``bench`` extra; only
+integer PCM WAV without it, by the standard library), mixed to mono, cut to
 its first EXCERPT_S seconds and resampled to the bench's rate (the
 synthesized pieces' SAMPLE_RATE). A recording shorter than MIN_S is left
 out: the bench's wrong-cue decks start up to 60 s in and 20 s before the
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from marionette.errors import MarionetteError
-from marionette.music.feature import mono, read_wav
+from marionette.music.feature import AudioError, mono, read_wav
 from marionette.sim.music import SAMPLE_RATE
 
 DEFAULT_DIRS = ("/usr/share/hyperrogue/music",)
@@ -45,7 +45,7 @@ INSTALL = ("apt-get install hyperrogue-music (Debian/Ubuntu) and pip install '.[
 
 @dataclass
 class Recording:
-    name: str                   # the file's name without its suffix
+    name: str                   # its path under its folder, without the suffix
     path: Path
     samples: np.ndarray         # mono [full scale] at sample_rate
     sample_rate: float          # [Hz]
@@ -68,13 +68,14 @@ def folders(music_dirs=None) -> list[Path]:
     return [Path(d) for d in (given or DEFAULT_DIRS)]
 
 
-def find(dirs: list[Path]) -> list[Path]:
-    """Every recording under dirs, sorted by path."""
-    return sorted(p for d in dirs if d.is_dir() for p in d.rglob("*")
-                  if p.is_file() and p.suffix.lower() in SUFFIXES)
+def find(dirs: list[Path]) -> list[tuple[Path, str]]:
+    """Every recording under dirs, sorted by path, with its name: its path
+    under its folder without the suffix (two albums' track01 stay apart)."""
+    return sorted((p, p.relative_to(d).with_suffix("").as_posix()) for d in dirs if d.is_dir()
+                  for p in d.rglob("*") if p.is_file() and p.suffix.lower() in SUFFIXES)
 
 
-def pick(paths: list[Path], count: int = COUNT) -> list[Path]:
+def pick(paths: list, count: int = COUNT) -> list:
     """count of paths spread over the sorted list: every k-th, k = len // count."""
     return paths[::max(1, len(paths) // count)][:count]
 
@@ -93,11 +94,20 @@ def resample(x: np.ndarray, rate: float, to: float) -> np.ndarray:
     return np.fft.irfft(kept, m) * (m / n)
 
 
-def decode(path: Path, excerpt_s: float = EXCERPT_S, rate: float = SAMPLE_RATE) -> Recording:
-    """One recording: mono, its first excerpt_s seconds, at rate [Hz]."""
-    x, fs = read_wav(path)
+def decode(path: Path, name: str, excerpt_s: float = EXCERPT_S, rate: float = SAMPLE_RATE) -> Recording:
+    """One recording: mono, its first excerpt_s seconds, at rate [Hz]. With
+    soundfile only the excerpt is read (a long recording stays cheap)."""
+    if importlib.util.find_spec("soundfile") is None:
+        x, fs = read_wav(path)
+    else:
+        import soundfile
+        try:
+            fs = soundfile.info(str(path)).samplerate
+            x, fs = soundfile.read(str(path), frames=int(excerpt_s * fs), dtype="float64")
+        except Exception as exc:        # libsndfile's errors: one message naming the file
+            raise AudioError(f"{path}: cannot read audio: {exc}") from None
     x = mono(x)[:int(excerpt_s * fs)]
-    return Recording(path.stem, path, resample(x, fs, rate), float(rate))
+    return Recording(name, path, resample(x, fs, rate), float(rate))
 
 
 def load(music_dirs=None, count: int = COUNT, excerpt_s: float = EXCERPT_S) -> tuple[list[Recording], str]:
@@ -111,12 +121,12 @@ def load(music_dirs=None, count: int = COUNT, excerpt_s: float = EXCERPT_S) -> t
         return [], f"no recordings (.ogg/.wav/.flac) in {where}; to add them: {INSTALL}"
     notes = []
     if importlib.util.find_spec("soundfile") is None:
-        wav = [p for p in paths if p.suffix.lower() == ".wav"]
+        wav = [(p, name) for p, name in paths if p.suffix.lower() == ".wav"]
         if len(wav) < len(paths):
             notes.append(f"{len(paths) - len(wav)} recording(s) in {where} need the soundfile "
                          "package: pip install '.[bench]'")
             paths = wav
-    recordings = [decode(p, excerpt_s) for p in pick(paths, count)]
+    recordings = [decode(p, name, excerpt_s) for p, name in pick(paths, count)]
     short = [r.name for r in recordings if r.duration < MIN_S]
     if short:
         notes.append(f"left out, shorter than {MIN_S:g} s: {', '.join(short)}")
