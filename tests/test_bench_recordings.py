@@ -119,6 +119,8 @@ def test_real_recordings_run_through_the_tape_decks(loaded):
         # together: every measured tick of both, so between the two
         lo, hi = sorted((a["within50"], a["real"]["within50"]))
         assert lo <= a["together"]["within50"] <= hi
+        assert list(a["real"]["per_piece"]) == ["real/waltz"]
+        assert list(a["together"]["per_piece"]) == ["pop", "real/waltz"]
     by_set = {(r["mode"], r["start"]): r for r in with_real}
     labels = {f"{k} {op} {b:g}" for k, op, b in sync.REAL_TARGETS}
     assert set(by_set["smooth", "unknown"]["real"]["targets"]) == labels
@@ -127,6 +129,8 @@ def test_real_recordings_run_through_the_tape_decks(loaded):
     assert "targets, real recordings (smooth mode):" in table
     assert table.count("real/waltz/pauses ") == 4                    # smooth, paper, cued, unknown
     assert "smooth real " in table and "smooth both " in table
+    pieces = table.split("\nper piece")[1].split("\n\n")[1].splitlines()
+    assert [line.split()[0] for line in pieces[1:]] == ["pop", "real/waltz"]
 
 
 def test_without_recordings_the_bench_says_how_and_skips(tmp_path, capsys):

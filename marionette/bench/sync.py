@@ -48,8 +48,9 @@ Figures per mode, over the target scenarios (|speed - 1| <= 6 %, SNR >= 20 dB):
   (clock_gettime around each call), on the measured ticks of all runs.
 
 Extra keys: lock_s_median, relock_after_pause_s_median, relock_after_jump_s_max [s],
-scenarios (one row per run) and all_scenarios (the same figures over every
-run, the 10 dB SNR ones too).
+scenarios (one row per run), all_scenarios (the same figures over every
+run, the 10 dB SNR ones too) and per_piece (piece -> the figures over its
+target runs; the table's "per piece" rows).
 
 The cue (Follower.cue, docs/music.md), smooth mode only. None of the
 scenarios above starts at the top (their start is drawn), so each has a
@@ -386,7 +387,8 @@ def run(seconds: float | None = None, quick: bool = False, seed: int = SEED, pro
         return follower.run(live, live_onsets, timing=True)
 
     def row(m, sc, played):
-        m.update(name=sc.name, target=sc.target, real=sc.real, speed=sc.deck.speed, snr_db=sc.deck.snr_db,
+        m.update(name=sc.name, piece=sc.piece, target=sc.target, real=sc.real, speed=sc.deck.speed,
+                 snr_db=sc.deck.snr_db,
                  start_s=sc.deck.start, seconds=len(played.truth) * T,
                  events=bool(sc.deck.pauses or sc.deck.jump))
         return m
@@ -453,10 +455,13 @@ def run(seconds: float | None = None, quick: bool = False, seed: int = SEED, pro
 def figures(rows: list[dict], targets) -> dict:
     """The figures of a set of runs: over its target runs, then
     all_scenarios (every run), no_events (the target runs without a pause
-    or a jump: what the cue alone does) and targets (label -> met)."""
+    or a jump: what the cue alone does), per_piece (piece -> the figures
+    of its target runs) and targets (label -> met)."""
     out = summarize([r for r in rows if r["target"]])
     out["all_scenarios"] = summarize(rows)
     out["no_events"] = summarize([r for r in rows if r["target"] and not r["events"]])
+    out["per_piece"] = {p: summarize([r for r in rows if r["target"] and r["piece"] == p])
+                        for p in dict.fromkeys(r["piece"] for r in rows)}
     out["targets"] = {label: ok for label, _, ok in check_targets(out, targets)}
     return out
 
@@ -515,10 +520,33 @@ def format_table(results: list[dict]) -> str:
         lines.append("targets, real recordings (smooth mode):")
         lines += _target_lines(res["real"], REAL_TARGETS)
     by_set = {(res["mode"], res.get("start", "unknown")): res for res in results}
+    if ("smooth", "unknown") in by_set:
+        lines.append("")
+        lines += _piece_lines(by_set)
     if ("smooth", "cue at top") in by_set:
         lines.append("")
         lines += _cue_lines(by_set)
     return "\n".join(lines)
+
+
+def _piece_lines(by_set: dict) -> list[str]:
+    """Smooth mode per piece (synthesized, then real), over its target
+    runs: from an unknown start, and the top decks cued at 0 when run."""
+    unknown = by_set["smooth", "unknown"]["together"]["per_piece"]
+    cue = by_set.get(("smooth", "cue at top"), {}).get("together", {}).get("per_piece", {})
+    lines = ["per piece (smooth mode, target runs): unknown start as in the scenarios above; cue: the "
+             "top decks cued at 0 (accuracy from 1 s after the onset); worst50: the lowest within50 of "
+             "one run", "",
+             f"{'piece':<26} {'within20':>8} {'within50':>8} {'worst50':>8} {'lock_s med/max':>15} "
+             f"{'false':>5}   {'cue w50':>8} {'cue_lk_s med/max':>16} {'false':>5}"]
+    for piece, s in unknown.items():
+        c = cue.get(piece)
+        cued = (f"{_fmt(c['within50'], '>8.1%')} {_fmt(c['cue_lock_s_median'], '>7.2f')}/"
+                f"{_fmt(c['cue_lock_s_max'], '<8.2f')} {c['false_locks']:>5d}" if c else "")
+        lines.append(f"{piece:<26} {_fmt(s['within20'], '>8.1%')} {_fmt(s['within50'], '>8.1%')} "
+                     f"{_fmt(s['within50_run_min'], '>8.1%')} {_fmt(s['lock_s_median'], '>7.2f')}/"
+                     f"{_fmt(s['lock_s_max'], '<7.2f')} {s['false_locks']:>5d}   {cued}")
+    return lines
 
 
 def _kinds(res: dict, every: str | None = None) -> list[tuple[str, dict]]:
