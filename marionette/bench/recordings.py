@@ -83,7 +83,7 @@ def pick(paths: list, count: int = COUNT) -> list:
 def resample(x: np.ndarray, rate: float, to: float) -> np.ndarray:
     """x [full scale] at rate [Hz] at the rate to [Hz], band-limited (by the
     DFT: the spectrum cut or padded at the lower Nyquist frequency)."""
-    if rate == to:
+    if rate == to or not len(x):        # nothing to do (an empty file is left out as short)
         return x
     n = len(x)
     m = int(round(n * to / rate))
