@@ -33,8 +33,8 @@ def quick_results():
     return sync.collect(quick=True, seeds=1)
 
 
-def test_quick_run_has_the_documented_keys(capsys):
-    assert sync.main(["--json", "--quick"]) == 0
+def test_quick_run_has_the_documented_keys(capsys, tmp_path):
+    assert sync.main(["--json", "--quick", "--music-dir", str(tmp_path)]) == 0     # no recordings
     results = json.loads(capsys.readouterr().out)
     assert [(r["mode"], r["start"]) for r in results] == SETS
     for r in results:
@@ -59,7 +59,7 @@ def test_quick_run_has_the_documented_keys(capsys):
 
 def test_table_names_targets_and_machine(quick_results):
     out = sync.format_table(quick_results)
-    assert "machine:" in out and "targets (smooth mode" in out
+    assert "machine:" in out and "targets, synthesized pieces (smooth mode" in out
     assert ("all targets met" in out) or ("FAILED" in out)
     for key, op, bound in sync.TARGETS + sync.CUE_TARGETS + sync.WRONG_CUE_TARGETS:
         assert f"{key} {op} {bound:g}" in out
@@ -70,16 +70,20 @@ def test_table_names_targets_and_machine(quick_results):
     assert out.count("pop/pauses ") == 4 and out.count("pop/wrong1 ") == 1
 
 
-def test_strict_exits_1_when_a_target_fails(quick_results, monkeypatch, capsys):
+def test_strict_exits_1_when_a_target_fails(quick_results, monkeypatch, capsys, tmp_path):
     results = [dict(r, targets=dict(r["targets"])) for r in quick_results]
     for r in results:
         r["targets"] = {k: True for k in r["targets"]}
     monkeypatch.setattr(sync, "collect", lambda *a, **k: results)
-    assert sync.main(["--quick", "--strict"]) == 0
+    argv = ["--quick", "--music-dir", str(tmp_path)]           # no recordings: their targets skipped
+    assert sync.main(argv + ["--strict"]) == 0
     cue = next(r for r in results if r["start"] == "cue at top")
     cue["targets"]["false_locks <= 0"] = False
-    assert sync.main(["--quick", "--strict"]) == 1
-    assert sync.main(["--quick"]) == 0                         # without --strict: a report only
+    assert sync.main(argv + ["--strict"]) == 1
+    assert sync.main(argv) == 0                                # without --strict: a report only
+    cue["targets"]["false_locks <= 0"] = True
+    cue["real"] = dict(cue, targets={"false_locks <= 0": False})    # a real recording's target fails
+    assert sync.main(argv + ["--strict"]) == 1
     capsys.readouterr()
 
 
