@@ -140,6 +140,36 @@ def test_console_keys_pause_resume_estop_release_quit(tmux, sim, tmp_path):
     assert holding[-1] and len(r) < 1000
 
 
+def test_a_pause_moves_the_show_s_end_later_and_the_show_plays_to_it(tmux, tmp_path):
+    """Paused for 1.5 s in a 3 s real-time show: the show still plays to its
+    last tick (the run ends at the show's end, not after the show's ticks of
+    wall time), about 1.5 s later than it would have."""
+    from marionette.config import load_config
+    from conftest import make_show, smooth_dance
+    config = load_config(None)
+    ticks = 150
+    show_path = tmp_path / "short.csv"
+    make_show(config, smooth_dance(config, ticks, np.random.default_rng(8))).save(show_path)
+    flight = tmp_path / "flight.bin"
+    term = tmux(PLAY + [show_path, "--realtime", "--priority", "0", "--record", flight])
+    term.wait_for("flight recorder")
+    time.sleep(0.5)
+    term.send("Space")
+    term.wait_for("HOLDING")
+    time.sleep(1.5)
+    term.send("Space")
+    term.wait_for("resumed: blending back in")
+    screen = term.wait_for("played ", timeout=20.0)
+    assert term.exit_status() == 0
+    assert "ended early" not in screen and "Traceback" not in screen
+    _, r = read_flight_record(flight)
+    holding = (r["flags"] & _core.FLAG_HOLDING) != 0
+    assert holding.sum() > 60                          # paused for about 1.5 s
+    assert r["position"].max() >= ticks - 1.5          # ... and still played to the show's last tick
+    assert len(r) > ticks + 60
+    assert r["flags"][-1] & _core.FLAG_END
+
+
 def test_console_without_rich_falls_back_to_headless(tmux):
     code = ("import sys; sys.modules['rich'] = None; from marionette.cli import main; "
             "sys.exit(main(['play', '--ticks', '10']))")

@@ -22,6 +22,7 @@ from marionette.music.report import (LostWatcher, choose_latency, follow_share, 
                                      never_locked_warning, recording_warnings, share_line,
                                      verdict_line)
 
+PAUSE_ALLOWANCE_S = 600.0   # the operator's pauses may move a real-time show's end this much later [s]
 TICKS = Number(int, 1)
 RATE = Number(float, 0.0, MAX_RATE)
 CPU = Number(int, 0, (os.cpu_count() or 1) - 1)
@@ -117,13 +118,17 @@ def run(args) -> int:
         raise MarionetteError("give --output or --link, not both")
     live = _recording_source(args, config)
     follow = args.follow or (True if (live is not None or args.audio_device is not None) else None)
-    # without --ticks, a show that follows music runs to its end (FLAG_END), which slow
-    # music reaches after more ticks than the show has: at most at rate_min, plus a
-    # minute of waiting at the cue
-    until_end = args.ticks is None and bool(follow)
+    # without --ticks, a show that follows music, or plays in real time, runs to its
+    # end (FLAG_END): slow music, the operator's pauses (space) and --rate < 1 move the
+    # end later than the show's ticks. The run's cap [ticks]: the show at its slowest
+    # rate, plus a minute of waiting at the cue when following, plus PAUSE_ALLOWANCE_S
+    # in real time
+    until_end = args.ticks is None and (bool(follow) or args.realtime)
     n = args.ticks if args.ticks is not None else show.n_ticks
     if until_end:
-        n = int(np.ceil(show.n_ticks / config.follow.rate_min)) + int(60.0 / period)
+        slowest = config.follow.rate_min if follow else args.rate                 # [1]
+        n = int(np.ceil(show.n_ticks / slowest)) if slowest > 0 else show.n_ticks
+        n += int(60.0 / period) * bool(follow) + int(PAUSE_ALLOWANCE_S / period) * args.realtime
         if live is not None:            # a recording: no longer than it lasts, no shorter than the show
             n = max(show.n_ticks, min(n, len(live.loudness) + 1))
     if live is not None:        # said before the show, which goes on regardless
@@ -137,7 +142,7 @@ def run(args) -> int:
     elif args.link:
         from marionette.transport import open_link
         output = open_link(args.link)
-    audio, watcher, engine_box = None, None, []
+    audio, watcher, faults, engine_box = None, None, None, []
     view = None
     on_lost = config.follow.on_lost
     try:
@@ -166,7 +171,7 @@ def run(args) -> int:
                     live.start()
                 view.wait()
                 engine.stop()
-                faults.stop()
+                faults.stop()               # (again in finally when something raised: idempotent)
                 if watcher is not None:
                     watcher.stop()
             elif live is not None:       # tick k has heard frame k - 1, as in sync-sim
@@ -188,6 +193,8 @@ def run(args) -> int:
             live.stop()
         if watcher is not None:
             watcher.stop()
+        if faults is not None:
+            faults.stop()
         if audio is not None:
             audio.stop()
         if isinstance(output, int):
