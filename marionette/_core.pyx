@@ -71,6 +71,7 @@ def record_dtype(size_t n_axes):
         ("flags", "<u4"), ("limited_axes", "<u4"),
         ("follow_state", "<i4"), ("node_alarms", "<u4"),
         ("command", "<f8", (n_axes,)),
+        ("excess", "<f8", (n_axes,)),     # target - command where the limits acted, else 0 [unit]
     ])
 
 
@@ -150,6 +151,9 @@ cdef class CoreEngine:
             raise MemoryError()
         self.n_axes = n_axes
         self.record_dtype = record_dtype(n_axes)
+        if self.record_dtype.itemsize != mar_engine_record_size(self.engine):
+            raise RuntimeError(f"record_dtype has {self.record_dtype.itemsize} bytes, the C "
+                               f"record {mar_engine_record_size(self.engine)}: they must match")
 
     def __dealloc__(self):
         if self.loop != NULL:

@@ -19,7 +19,8 @@ from marionette.config import load_config
 from marionette.console import open_view
 from marionette.demo import DEMO_SHOW
 from marionette._core import FLAG_END
-from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
+from marionette import limiter_report
+from marionette.engine import DEFAULT_LEAD, FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, Engine
 from marionette.errors import MarionetteError
 from marionette.faults import FaultWatcher, summary as fault_summary
 from marionette.music.report import (LostWatcher, choose_latency, follow_share, lost_events,
@@ -176,7 +177,8 @@ def cmd_play(args) -> int:
         print(f"  show changed: {change}")
     print(f"  flight recorder: {stats['recorded']} records, {stats['records_dropped']} dropped"
           + (f", written to {args.record}" if args.record else ""))
-    print(f"  limits acted on {stats['limited']} axis-ticks; bad inputs refused: {stats['bad_input']}")
+    print(f"  bad inputs refused: {stats['bad_input']}")
+    limiter_report.print_summary(records, config, period)
     if args.output or args.link:
         print(f"  output {args.output or args.link}: {stats['sink_frames']} ticks sent, "
               f"{stats['sink_bytes']} bytes, {stats['sink_errors']} lost")
@@ -230,7 +232,7 @@ def cmd_shape(args) -> int:
     show = load_show(args.show, config)
     shaped, report = shape_show(show, config, policy=args.policy, prominence=args.prominence,
                                 rest_tolerance=args.rest_tolerance,
-                                accel_fraction=args.accel_fraction, lag_headroom=args.lag_headroom)
+                                accel_fraction=args.accel_fraction, lead=args.lead)
     shaped.save(args.output)
     print(report)
     print(f"wrote {args.output}")
@@ -261,7 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="the status lines as JSON lines (headless)")
     p.add_argument("--ticks", type=int, help="ticks to run (default: the whole show)")
     p.add_argument("--rate", type=float, default=1.0, help="playback rate [show ticks per tick]")
-    p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag")
+    p.add_argument("--lead", choices=sorted(LEAD_MODES), default=DEFAULT_LEAD)
     p.add_argument("--interpolation", choices=sorted(INTERPOLATIONS), default="cubic")
     p.add_argument("--priority", type=int, default=80, help="SCHED_FIFO priority (0: normal)")
     p.add_argument("--cpu", type=int, help="pin the real-time thread to this CPU")
@@ -306,9 +308,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rest band around an extremum [axis unit] (default: 0.5 %% of the range)")
     p.add_argument("--accel-fraction", type=float, default=1.0,
                    help="plan the moves to this fraction of each top acceleration (0 < f <= 1)")
-    p.add_argument("--lag-headroom", action="store_true",
-                   help="plan the speed to leave room for the lag feed-forward of lead "
-                        "dead_time_lag (top speed - time_constant * acceleration)")
+    p.add_argument("--lead", choices=sorted(LEAD_MODES), default=DEFAULT_LEAD,
+                   help="the lead the show will be played with (play --lead): the moves are "
+                        "planned for the command it makes (default: %(default)s)")
     p.set_defaults(run=cmd_shape)
 
     for name in COMMAND_MODULES:

@@ -21,6 +21,7 @@ from marionette.config import load_config
 from marionette.errors import TeachError
 from marionette.music.feature import wav_frames
 from marionette.progress import Progress
+from marionette.engine import DEFAULT_LEAD, LEAD_MODES
 from marionette.shape import POLICIES, shape_show
 from marionette.show import LIMIT_POLICIES, Show, fit_to_figure
 from marionette.teach.axis_map import map_axes
@@ -144,7 +145,7 @@ def _teach(args, progress: Progress) -> int:
     report = None
     if not args.no_shape:
         show, report = shape_show(show, config, policy=args.policy,
-                                  accel_fraction=args.accel_fraction, lag_headroom=args.lag_headroom)
+                                  accel_fraction=args.accel_fraction, lead=args.lead)
     stage_values["shaped"] = show.positions
 
     progress.step("music")
@@ -242,8 +243,9 @@ def register(subparsers) -> None:
                         "borrow time from the preceding rest, or reject (error)")
     p.add_argument("--accel-fraction", type=float, default=1.0,
                    help="plan the moves to this fraction of each top acceleration (0 < f <= 1)")
-    p.add_argument("--lag-headroom", action="store_true",
-                   help="plan the speed to leave room for the lag feed-forward (as `marionette shape`)")
+    p.add_argument("--lead", choices=sorted(LEAD_MODES), default=DEFAULT_LEAD,
+                   help="pragmatic filter: the lead the show will be played with (as "
+                        "`marionette shape`; default: %(default)s)")
     p.add_argument("--no-shape", action="store_true", help="skip the pragmatic filter")
     p.add_argument("--on-limits", choices=LIMIT_POLICIES, default="error",
                    help="taught positions outside an axis's limits: error (default), clamp, compress")

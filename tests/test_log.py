@@ -133,8 +133,10 @@ def test_csv_holds_every_field_of_every_tick(which, request, tmp_path):
     meta, rec = read_flight_record(path)
     header, rows = read_csv(out)
     assert len(rows) == len(rec)
-    scalars = [f for f in rec.dtype.names if f != "command"]
-    assert header == scalars + [f"command_{name}" for name in meta["axis_names"]]
+    per_axis = ("command", "excess")
+    scalars = [f for f in rec.dtype.names if f not in per_axis]
+    names = meta["axis_names"]
+    assert header == scalars + [f"{f}_{name}" for f in per_axis for name in names]
     assert all(len(r) == len(header) for r in rows)
     cols = list(zip(*rows))
     for k, field in enumerate(scalars):
@@ -142,8 +144,10 @@ def test_csv_holds_every_field_of_every_tick(which, request, tmp_path):
         values = np.array([float(v) if kind == "f" else int(v) for v in cols[k]],
                           dtype=rec.dtype[field])
         np.testing.assert_array_equal(values, rec[field], err_msg=field)   # bit for bit, NaN too
-    commands = np.array(cols[len(scalars):], dtype=float).T
-    np.testing.assert_array_equal(commands, rec["command"])
+    for i, field in enumerate(per_axis):
+        start = len(scalars) + i * len(names)
+        values = np.array(cols[start:start + len(names)], dtype=float).T
+        np.testing.assert_array_equal(values, rec[field], err_msg=field)
 
 
 def test_plot_writes_a_png(music_record, step_record, tmp_path):
