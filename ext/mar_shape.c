@@ -404,6 +404,8 @@ int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,
             }
             if (!fits(fabs(D), reach)) {
                 end = start + (D > 0.0 ? reach : -reach);
+                while (fabs(end - start) > reach)   /* rounding, far from 0 with a small reach */
+                    end = nextafter(end, start);
                 action |= MAR_SHAPE_ACT_REDUCED;
             }
         }

@@ -174,14 +174,16 @@ def _aligned_shifts(y: np.ndarray, x: np.ndarray, ticks: np.ndarray, substeps: i
     out = np.full(len(ticks), np.nan)
     max_shift = MAX_SHIFT_TICKS * substeps
     shifts = np.arange(-max_shift, max_shift + 1)
+    y = np.pad(y, max_shift, mode="edge")          # at rest before and after the run
+    x = np.pad(x, max_shift, mode="edge")
     for i, k in enumerate(ticks):
         half = ALIGN_TICKS
         if i > 0:
             half = min(half, (k - ticks[i - 1]) // 2)
         if i + 1 < len(ticks):
             half = min(half, (ticks[i + 1] - k) // 2)
-        lo, hi = (k - half) * substeps, (k + half) * substeps + 1
-        if half < 1 or lo - max_shift < 0 or hi + max_shift > len(y):
+        lo, hi = (k - half) * substeps + max_shift, (k + half) * substeps + 1 + max_shift
+        if half < 1:
             continue
         rows = np.lib.stride_tricks.sliding_window_view(y[lo - max_shift:hi + max_shift], hi - lo)
         cost = np.sum((rows - x[lo:hi]) ** 2, axis=1)         # one row per shift
