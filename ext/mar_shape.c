@@ -91,13 +91,44 @@ void mar_shape_lag_limits(double w, double lag, double vmax, double amax,
 {
     double a = amax, v = vmax;
     if (lag > 0.0) {
-        a = w > 0.0 ? amax * w / (w + 2.0 * lag) : 0.0;
+        a = w > 0.0 ? amax * w / (w + lag) : 0.0;
         if (a > 0.5 * vmax / lag)
             a = 0.5 * vmax / lag;
         v = vmax - lag * a;
     }
     *speed = v;
     *accel = a;
+}
+
+/* Largest |D| [unit] of a core of Tc [s] at speed v [unit/s] and
+ * acceleration a [unit/s^2] that cruises at least w [s] between its ramps
+ * (so that the moving average over w never joins two of its corners). */
+static double core_reach(double Tc, double w, double v, double a)
+{
+    if (!(Tc > w) || !(a > 0.0))
+        return 0.0;
+    double r = 0.5 * (Tc - w);                  /* ramps with a cruise of just w [s] */
+    if (a * r <= v)
+        return a * r * (r + w);
+    return v * (Tc - v / a);                    /* cruising at v, longer than w */
+}
+
+/* The least-acceleration core for |D| = d [unit] over Tc [s] that cruises
+ * at least w [s]; 0, or MAR_SHAPE_INFEASIBLE beyond core_reach. */
+static int plan_core(double d, double Tc, double w, double v, double a, mar_shape_profile *p)
+{
+    if (!fits(d, core_reach(Tc, w, v, a)))
+        return MAR_SHAPE_INFEASIBLE;
+    double r = 0.5 * (Tc - w), peak = d / (r + w), accel;       /* [s], [unit/s] */
+    if (peak > v) {                             /* cruise at v, longer than w */
+        peak = v;
+        r = Tc - d / v;
+    }
+    accel = r > 0.0 ? peak / r : 0.0;
+    p->accel = accel > a ? a : accel;           /* only by rounding: fits() allowed FIT_SLACK */
+    p->peak_speed = peak;
+    p->ramp = r;
+    return 0;
 }
 
 double mar_shape_reach_lag(double T, double vmax, double amax, double lag, double *smooth)
@@ -112,7 +143,7 @@ double mar_shape_reach_lag(double T, double vmax, double amax, double lag, doubl
     for (int i = 1; i < SMOOTH_STEPS; ++i) {
         double w = T * (double)i / SMOOTH_STEPS, v, a;     /* [s], [unit/s], [unit/s^2] */
         mar_shape_lag_limits(w, lag, vmax, amax, &v, &a);
-        double r = mar_shape_reach(T - w, v, a);
+        double r = core_reach(T - w, w, v, a);
         if (r > best) {
             best = r;
             best_w = w;
@@ -128,8 +159,8 @@ int mar_shape_plan_lag(double x0, double x1, double t0, double T,
 {
     if (!(lag > 0.0))
         return lag == 0.0 ? mar_shape_plan(x0, x1, t0, T, vmax, amax, p) : -EINVAL;
-    if (p == NULL || !finite_positive(T) || !finite_positive(vmax) || !finite_positive(amax) ||
-        !isfinite(lag))
+    if (p == NULL || !isfinite(x0) || !isfinite(x1) || !isfinite(t0) || !finite_positive(T) ||
+        !finite_positive(vmax) || !finite_positive(amax) || !isfinite(lag))
         return -EINVAL;
     double d = fabs(x1 - x0);                   /* [unit] */
     double w, v, a;                             /* [s], [unit/s], [unit/s^2] */
@@ -140,17 +171,22 @@ int mar_shape_plan_lag(double x0, double x1, double t0, double T,
     for (int i = 1; i < SMOOTH_STEPS; ++i) {
         double wi = T * (double)i / SMOOTH_STEPS;
         mar_shape_lag_limits(wi, lag, vmax, amax, &v, &a);
-        if (fits(d, mar_shape_reach(T - wi, v, a))) {
+        if (fits(d, core_reach(T - wi, wi, v, a))) {
             w = wi;
             break;
         }
     }
     mar_shape_lag_limits(w, lag, vmax, amax, &v, &a);
-    int r = mar_shape_plan(x0, x1, t0 + 0.5 * w, T - w, v, a, p);
-    if (r != 0)
-        return r;
+    if (d == 0.0) {
+        p->accel = p->peak_speed = 0.0;
+        p->ramp = 0.5 * (T - w);
+    } else if (plan_core(d, T - w, w, v, a, p) != 0) {
+        return MAR_SHAPE_INFEASIBLE;            /* rounding at the edge of the reach */
+    }
     p->t0 = t0;
     p->duration = T;
+    p->x0 = x0;
+    p->x1 = x1;
     p->smooth = w;
     return 0;
 }

@@ -100,19 +100,20 @@ typedef struct {
 double mar_shape_reach(double duration, double max_speed, double max_accel);
 
 /* The limits a move with smoothing window w [s] is planned to, so that its
- * command x + lag * x' keeps |speed| <= vmax and |accel| <= amax: the core's
- * acceleration a <= amax * w / (w + 2 lag) (a corner of the core, at most a
- * step of 2a, becomes a jerk of 2a/w, which the feed-forward turns into
- * lag * 2a/w of acceleration) and at most vmax / (2 lag); its speed
- * vmax - lag * a. lag = 0: vmax and amax. */
+ * command x + lag * x' keeps |speed| <= vmax and |accel| <= amax: the core
+ * cruises at least w between its ramps, so each corner of its acceleration
+ * (a step of at most a) becomes on its own a jerk of a/w, which the
+ * feed-forward turns into lag * a/w of acceleration: a <= amax * w / (w + lag),
+ * and at most vmax / (2 lag); the speed vmax - lag * a. lag = 0: vmax and
+ * amax. */
 void mar_shape_lag_limits(double smooth, double lag, double max_speed, double max_accel,
                           double *speed, double *accel);
 
 /* Largest distance [unit] a rest-to-rest move of duration T [s] covers when
  * its command x + lag * x' must keep the limits: the best over the
- * smoothing width (written to *smooth [s] when not NULL) of
- * mar_shape_reach(T - w, mar_shape_lag_limits(w)). lag = 0: mar_shape_reach,
- * smooth 0. NaN for bad limits. */
+ * smoothing width w (written to *smooth [s] when not NULL) of a core of
+ * T - w at mar_shape_lag_limits(w) that cruises at least w. lag = 0:
+ * mar_shape_reach, smooth 0. NaN for bad limits. */
 double mar_shape_reach_lag(double duration, double max_speed, double max_accel, double lag,
                            double *smooth);
 
@@ -130,9 +131,10 @@ double mar_shape_min_time(double distance, double max_speed, double max_accel);
 int mar_shape_plan(double x0, double x1, double t0, double duration,
                    double max_speed, double max_accel, mar_shape_profile *p);
 
-/* The same move for a lag feed-forward of lag [s]: the smoothing width of
- * mar_shape_reach_lag, the core planned by mar_shape_plan to the limits of
- * mar_shape_lag_limits. lag = 0: mar_shape_plan. */
+/* The same move for a lag feed-forward of lag [s]: the narrowest smoothing
+ * width (of those mar_shape_reach_lag tries) with which it fits, and the
+ * least-acceleration core that cruises at least that width, to the limits
+ * of mar_shape_lag_limits. lag = 0: mar_shape_plan. */
 int mar_shape_plan_lag(double x0, double x1, double t0, double duration,
                        double max_speed, double max_accel, double lag, mar_shape_profile *p);
 

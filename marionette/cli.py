@@ -28,7 +28,7 @@ from marionette.music.report import (LostWatcher, choose_latency, follow_share, 
                                      verdict_line)
 from marionette.show import LIMIT_POLICIES, load_show
 
-BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync")
+BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync", "shape")
 # commands that live in their own modules (marionette/cmd_<name>.py, each with
 # register(subparsers) setting run=...)
 COMMAND_MODULES = ("calibrate", "teach", "plot", "sim", "sync_sim", "log", "demo")

@@ -210,8 +210,12 @@ def _report(args, config, settings, stages, show, report, untaught, music_frames
         print("  shaping: skipped (--no-shape)")
     else:
         bad = report.infeasible
+        limited = report.limited
         print(f"  segments shaped: {report.segments} moves between points of rest "
-              f"(policy {report.policy}); infeasible: {len(bad)}")
+              f"(policy {report.policy}, lead {report.lead}); infeasible: {len(bad)}; the engine's "
+              f"limits act on {sum(a.ticks for a in limited)} axis-ticks of the show")
+        for a in limited:
+            print(f"    limited: {a.describe()}")
         for seg in bad[:args.list_infeasible]:
             print(f"    {seg.describe()}")
         if len(bad) > args.list_infeasible:
