@@ -178,7 +178,7 @@ def cmd_play(args) -> int:
     print(f"  flight recorder: {stats['recorded']} records, {stats['records_dropped']} dropped"
           + (f", written to {args.record}" if args.record else ""))
     print(f"  bad inputs refused: {stats['bad_input']}")
-    limiter_report.print_summary(records, config, period)
+    limiter_report.print_summary(records, config, period, json_lines=args.json)
     if args.output or args.link:
         print(f"  output {args.output or args.link}: {stats['sink_frames']} ticks sent, "
               f"{stats['sink_bytes']} bytes, {stats['sink_errors']} lost")

@@ -10,6 +10,7 @@ show against the engine's command.
 """
 from __future__ import annotations
 
+import json
 import sys
 from dataclasses import dataclass
 
@@ -79,9 +80,10 @@ def summary(records: np.ndarray, config, period: float) -> tuple[list[str], str 
     return lines, warning
 
 
-def print_summary(records: np.ndarray, config, period: float) -> None:
-    """The summary lines on stdout, the warning (if any) on stderr."""
+def print_summary(records: np.ndarray, config, period: float, json_lines: bool = False) -> None:
+    """The summary lines on stdout, the warning (if any) on stderr: as a
+    JSON object {"warning": ...} where stderr carries JSON lines (play --json)."""
     lines, warning = summary(records, config, period)
     print("\n".join(lines))
     if warning:
-        print(warning, file=sys.stderr)
+        print(json.dumps({"warning": warning}) if json_lines else warning, file=sys.stderr)
