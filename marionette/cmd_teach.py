@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from marionette.config import load_config
+from marionette.engine import DEFAULT_LEAD, LEAD_MODES
 from marionette.errors import TeachError
 from marionette.music.feature import wav_frames
 from marionette.progress import Progress
-from marionette.engine import DEFAULT_LEAD, LEAD_MODES
 from marionette.shape import POLICIES, shape_show
 from marionette.show import LIMIT_POLICIES, Show, fit_to_figure
 from marionette.teach.axis_map import map_axes

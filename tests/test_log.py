@@ -204,3 +204,12 @@ def test_bad_files_are_errors_that_name_the_file(step_record, tmp_path):
     assert result.returncode == 2 and "missing.bin: no such flight record" in result.stderr
     result = run_cli("log", step_record, "--plot", tmp_path / "x.png", "--axes", "x,nose")
     assert result.returncode == 2 and "no axis 'nose'" in result.stderr
+
+
+def test_record_size_is_the_documented_one(step_record):
+    """72 bytes and 16 per axis (docs/formats.md); the file's records read back at that size,
+    and the engine (which checks its C record against record_dtype) wrote them."""
+    meta, rec = read_flight_record(step_record)
+    n = len(meta["axis_names"])
+    assert rec.dtype.itemsize == meta["record_bytes"] == 72 + 16 * n
+    assert rec.dtype == _core.record_dtype(n)
