@@ -94,7 +94,9 @@ void mar_shape_lag_limits(double w, double lag, double vmax, double amax,
         a = w > 0.0 ? amax * w / (w + lag) : 0.0;
         if (a > 0.5 * vmax / lag)
             a = 0.5 * vmax / lag;
-        v = vmax - lag * a;
+        /* the feed-forward's speed peaks inside a window over a corner of the
+         * ramp: x' + lag*x'' <= v + a*lag^2/(2w) (lag <= w), v + a*(lag - w/2) */
+        v = vmax - a * (lag <= w ? lag * lag / (2.0 * w) : lag - 0.5 * w);
     }
     *speed = v;
     *accel = a;

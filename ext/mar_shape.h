@@ -104,8 +104,9 @@ double mar_shape_reach(double duration, double max_speed, double max_accel);
  * cruises at least w between its ramps, so each corner of its acceleration
  * (a step of at most a) becomes on its own a jerk of a/w, which the
  * feed-forward turns into lag * a/w of acceleration: a <= amax * w / (w + lag),
- * and at most vmax / (2 lag); the speed vmax - lag * a. lag = 0: vmax and
- * amax. */
+ * and at most vmax / (2 lag). Where the smoothed ramp meets the cruise the
+ * command's speed exceeds the core's by at most a * lag^2 / (2w) (lag <= w)
+ * or a * (lag - w/2): the speed is vmax less that. lag = 0: vmax and amax. */
 void mar_shape_lag_limits(double smooth, double lag, double max_speed, double max_accel,
                           double *speed, double *accel);
 
