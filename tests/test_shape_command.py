@@ -48,18 +48,13 @@ def test_lag_moves_keep_the_commands_limits_and_end_at_rest():
     assert fitted > 150
 
 
-def random_dance(config, seed, seconds):
-    show = climax.random_dance(config, seconds, seed)
-    return show
-
-
 @pytest.mark.parametrize("lead", ["dead_time_lag", "mean_delay", "none"])
 def test_shaped_random_shows_leave_the_limiter_idle(lead):
     """Many random dances (faster than the servos), shaped for the lead they
     are played with: the engine limits no axis on any tick."""
     config = load_config()
     for seed in range(SEED, SEED + (12 if lead == "dead_time_lag" else 4)):
-        taught = random_dance(config, seed, 8.0)
+        taught = climax.random_dance(config, 8.0, seed)
         shaped, report = shape_show(taught, config, lead=lead,
                                     rest_tolerance=0.0 if seed % 2 else None)
         assert report.limited == [], (seed, [a.describe() for a in report.limited])
@@ -87,7 +82,7 @@ def test_climaxes_land_within_a_tick_on_the_simulated_servos():
 def test_infeasible_moves_are_reported_with_axis_time_and_trade():
     """A climax too far for its window: reduced (amplitude) or borrowed (time)."""
     config = load_config()
-    taught = random_dance(config, SEED, 8.0)
+    taught = climax.random_dance(config, 8.0, SEED)
     _, reduced = shape_show(taught, config, policy="reduce")
     _, borrowed = shape_show(taught, config, policy="borrow")
     assert reduced.infeasible and borrowed.infeasible

@@ -7,8 +7,8 @@
    plus small wiggles (0.4 % of the range, below the prominence) that must
    not count as points of rest.
 2. Shaped by ``marionette.shape.shape_show`` (policy reduce, default
-   prominence, ``rest_tolerance=0``: no holds, so every climax is a sharp
-   extremum of the shaped trajectory whose time can be measured), once per
+   prominence, ``rest_tolerance=0``: no holds, so every climax is a single
+   extremum of the shaped trajectory, not a plateau), once per
    lead below: planned for the command the engine makes with that lead
    (docs/shaping.md), so its limiter stays idle (``limited_axis_ticks_*``
    counts where it did act).
@@ -38,7 +38,8 @@
 Target: max |error| <= 1 tick with compensation. JSON keys:
 climax_error_ticks_max_compensated, climax_error_ticks_median_compensated,
 climax_error_ticks_max_uncompensated, climax_error_ticks_median_uncompensated,
-extremum_error_ticks_max_* and _median_* (both leads), limited_axis_ticks_compensated, limited_axis_ticks_uncompensated, plus
+extremum_error_ticks_max_* and _median_* (both leads),
+limited_axis_ticks_compensated, limited_axis_ticks_uncompensated, plus
 climaxes, infeasible (of the compensated shaping), seconds, seed,
 target_ticks, target_met.
 """
