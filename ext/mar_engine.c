@@ -19,6 +19,7 @@ struct mar_engine {
     double *feed_forward;           /* per axis: lag inversion gain tau [s], 0 if off */
     double *cmd;                    /* last command per axis [unit] */
     double *vel;                    /* its velocity [unit/s] */
+    double *excess;                 /* per axis: target - command where the limits acted, else 0 [unit] */
 
     /* tick thread only */
     double position;                /* p [show ticks] */
@@ -132,13 +133,14 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
     e->feed_forward = malloc(n_axes * sizeof(double));
     e->cmd = malloc(n_axes * sizeof(double));
     e->vel = calloc(n_axes, sizeof(double));
+    e->excess = calloc(n_axes, sizeof(double));
     e->snap_cmd = calloc(n_axes, sizeof(double));
     e->moves = calloc(n_axes, sizeof *e->moves);
     e->request_copy = calloc(n_axes, sizeof(double));
     e->request_targets = calloc(n_axes, sizeof(double));
     mar_axis_address *addr = malloc(n_axes * sizeof *addr);
     int ok = e->axes && e->show && e->loudness && e->lead_s && e->feed_forward && e->cmd
-          && e->vel && e->snap_cmd && e->moves && e->request_copy && e->request_targets && addr;
+          && e->vel && e->excess && e->snap_cmd && e->moves && e->request_copy && e->request_targets && addr;
     if (ok) {
         memcpy(e->axes, axes, n_axes * sizeof *axes);
         memcpy(e->show, show, n_axes * n_ticks * sizeof *show);
@@ -203,6 +205,7 @@ void mar_engine_destroy(mar_engine *e)
     free(e->feed_forward);
     free(e->cmd);
     free(e->vel);
+    free(e->excess);
     free(e->snap_cmd);
     free(e->moves);
     free(e->request_copy);
@@ -436,6 +439,7 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
             target = e->cmd[j];
         int hit;
         e->cmd[j] = mar_limit_step(&e->axes[j].limits, T, e->cmd[j], e->vel[j], target, &e->vel[j], &hit);
+        e->excess[j] = hit ? target - e->cmd[j] : 0.0;
         limited += (uint32_t)hit;
     }
     if (limited)
@@ -470,6 +474,7 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     if (slot) {
         memcpy(slot, &rec, sizeof rec);
         memcpy(slot + sizeof rec, e->cmd, e->n_axes * sizeof(double));
+        memcpy(slot + sizeof rec + e->n_axes * sizeof(double), e->excess, e->n_axes * sizeof(double));
         mar_ring_publish(&e->records);
     }
     publish_snapshot(e, &rec);
@@ -573,7 +578,7 @@ int mar_engine_snapshot(const mar_engine *e, mar_record *rec, double *commands)
 
 size_t mar_engine_record_size(const mar_engine *e)
 {
-    return sizeof(mar_record) + e->n_axes * sizeof(double);
+    return sizeof(mar_record) + 2 * e->n_axes * sizeof(double);
 }
 
 size_t mar_engine_drain_records(mar_engine *e, void *dst, size_t max)

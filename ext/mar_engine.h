@@ -99,7 +99,9 @@ enum mar_request {
                                   * pty's other end closed, a USB adapter unplugged): every node counts as
                                   * silent from the next tick on (also MAR_FLAG_NODE_SILENT); latched */
 
-/* A flight-recorder record, followed in memory by n_axes commands [unit]. */
+/* A flight-recorder record, followed in memory by n_axes commands [unit]
+ * and n_axes excesses [unit]: per axis, the target the limits did not let
+ * the command reach minus the command (0 where the limits did not act). */
 typedef struct {
     int64_t tick;               /* tick number since start */
     int64_t time_ns;            /* scheduled tick time [ns]: CLOCK_MONOTONIC, or virtual in step mode */
@@ -109,7 +111,7 @@ typedef struct {
     double stored_loudness;     /* taught loudness at p */
     double follow_confidence;   /* the follower's confidence [0, 1]; NaN without a follower */
     uint32_t flags;             /* MAR_FLAG_* */
-    uint32_t limited_axes;      /* axes whose command was limited this tick */
+    uint32_t limited_axes;      /* how many axes' commands were limited this tick */
     int32_t follow_state;       /* enum mar_follow_state; -1 without a follower */
     uint32_t node_alarms;       /* bit i: the i-th servo node is silent or faulted (set from Python) */
 } mar_record;

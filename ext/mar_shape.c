@@ -77,14 +77,128 @@ int mar_shape_plan(double x0, double x1, double t0, double T,
     p->accel = accel;
     p->peak_speed = peak;
     p->ramp = ramp;
+    p->smooth = 0.0;
     return 0;
 }
 
-/* Position [unit] at tau [s] after departure; velocity and acceleration out. */
-static double eval_local(const mar_shape_profile *p, double tau, double *v, double *a)
+/* Candidate smoothing widths per move: fractions i/SMOOTH_STEPS of its
+ * duration; the best reach among them is within a few percent of the best
+ * over all widths. */
+#define SMOOTH_STEPS 32
+
+void mar_shape_lag_limits(double w, double lag, double vmax, double amax,
+                          double *speed, double *accel)
+{
+    double a = amax, v = vmax;
+    if (lag > 0.0) {
+        a = w > 0.0 ? amax * w / (w + lag) : 0.0;
+        if (a > 0.5 * vmax / lag)
+            a = 0.5 * vmax / lag;
+        /* the feed-forward's speed peaks inside a window over a corner of the
+         * ramp: x' + lag*x'' <= v + a*lag^2/(2w) (lag <= w), v + a*(lag - w/2) */
+        v = vmax - a * (lag <= w ? lag * lag / (2.0 * w) : lag - 0.5 * w);
+    }
+    *speed = v;
+    *accel = a;
+}
+
+/* Largest |D| [unit] of a core of Tc [s] at speed v [unit/s] and
+ * acceleration a [unit/s^2] that cruises at least w [s] between its ramps
+ * (so that the moving average over w never joins two of its corners). */
+static double core_reach(double Tc, double w, double v, double a)
+{
+    if (!(Tc > w) || !(a > 0.0))
+        return 0.0;
+    double r = 0.5 * (Tc - w);                  /* ramps with a cruise of just w [s] */
+    if (a * r <= v)
+        return a * r * (r + w);
+    return v * (Tc - v / a);                    /* cruising at v, longer than w */
+}
+
+/* The least-acceleration core for |D| = d [unit] over Tc [s] that cruises
+ * at least w [s]; 0, or MAR_SHAPE_INFEASIBLE beyond core_reach. */
+static int plan_core(double d, double Tc, double w, double v, double a, mar_shape_profile *p)
+{
+    if (!fits(d, core_reach(Tc, w, v, a)))
+        return MAR_SHAPE_INFEASIBLE;
+    double r = 0.5 * (Tc - w), peak = d / (r + w), accel;       /* [s], [unit/s] */
+    if (peak > v) {                             /* cruise at v, longer than w */
+        peak = v;
+        r = Tc - d / v;
+    }
+    accel = r > 0.0 ? peak / r : 0.0;
+    p->accel = accel > a ? a : accel;           /* only by rounding: fits() allowed FIT_SLACK */
+    p->peak_speed = peak;
+    p->ramp = r;
+    return 0;
+}
+
+double mar_shape_reach_lag(double T, double vmax, double amax, double lag, double *smooth)
+{
+    double best = mar_shape_reach(T, vmax, amax), best_w = 0.0;
+    if (!isfinite(best) || !(lag > 0.0)) {
+        if (smooth != NULL)
+            *smooth = 0.0;
+        return isnan(lag) || lag < 0.0 ? NAN : best;
+    }
+    best = 0.0;
+    for (int i = 1; i < SMOOTH_STEPS; ++i) {
+        double w = T * (double)i / SMOOTH_STEPS, v, a;     /* [s], [unit/s], [unit/s^2] */
+        mar_shape_lag_limits(w, lag, vmax, amax, &v, &a);
+        double r = core_reach(T - w, w, v, a);
+        if (r > best) {
+            best = r;
+            best_w = w;
+        }
+    }
+    if (smooth != NULL)
+        *smooth = best_w;
+    return best;
+}
+
+int mar_shape_plan_lag(double x0, double x1, double t0, double T,
+                       double vmax, double amax, double lag, mar_shape_profile *p)
+{
+    if (!(lag > 0.0))
+        return lag == 0.0 ? mar_shape_plan(x0, x1, t0, T, vmax, amax, p) : -EINVAL;
+    if (p == NULL || !isfinite(x0) || !isfinite(x1) || !isfinite(t0) || !finite_positive(T) ||
+        !finite_positive(vmax) || !finite_positive(amax) || !isfinite(lag))
+        return -EINVAL;
+    double d = fabs(x1 - x0);                   /* [unit] */
+    double w, v, a;                             /* [s], [unit/s], [unit/s^2] */
+    if (!fits(d, mar_shape_reach_lag(T, vmax, amax, lag, &w)))
+        return MAR_SHAPE_INFEASIBLE;
+    /* the narrowest window that fits: the move ends at rest with no
+     * acceleration, and a wide window flattens the climax more than needed */
+    for (int i = 1; i < SMOOTH_STEPS; ++i) {
+        double wi = T * (double)i / SMOOTH_STEPS;
+        mar_shape_lag_limits(wi, lag, vmax, amax, &v, &a);
+        if (fits(d, core_reach(T - wi, wi, v, a))) {
+            w = wi;
+            break;
+        }
+    }
+    mar_shape_lag_limits(w, lag, vmax, amax, &v, &a);
+    if (d == 0.0) {
+        p->accel = p->peak_speed = 0.0;
+        p->ramp = 0.5 * (T - w);
+    } else if (plan_core(d, T - w, w, v, a, p) != 0) {
+        return MAR_SHAPE_INFEASIBLE;            /* rounding at the edge of the reach */
+    }
+    p->t0 = t0;
+    p->duration = T;
+    p->x0 = x0;
+    p->x1 = x1;
+    p->smooth = w;
+    return 0;
+}
+
+/* The core's position [unit] at tau [s] after its start; velocity and
+ * acceleration out. */
+static double eval_core(const mar_shape_profile *p, double tau, double *v, double *a)
 {
     double s = p->x1 >= p->x0 ? 1.0 : -1.0;    /* direction [1] */
-    double T = p->duration, ramp = p->ramp, acc = p->accel;
+    double T = p->duration - p->smooth, ramp = p->ramp, acc = p->accel;
     double x, vel, ac;
     if (tau <= 0.0) {
         x = p->x0;
@@ -118,6 +232,58 @@ static double eval_local(const mar_shape_profile *p, double tau, double *v, doub
         *v = vel;
     if (a != NULL)
         *a = ac;
+    return x;
+}
+
+/* Integral of (core position - x0) from its start to tau [s], [unit*s]:
+ * piecewise cubic, for the moving average. */
+static double core_integral(const mar_shape_profile *p, double tau)
+{
+    double s = p->x1 >= p->x0 ? 1.0 : -1.0;    /* direction [1] */
+    double T = p->duration - p->smooth, r = p->ramp, acc = p->accel, v = p->peak_speed;
+    double D = fabs(p->x1 - p->x0);             /* [unit] */
+    double cruise = T - 2.0 * r;                /* [s] */
+    if (tau <= 0.0)
+        return 0.0;
+    if (tau < r)
+        return s * acc * tau * tau * tau / 6.0;
+    double at_cruise = acc * r * r * r / 6.0;   /* integral over the first ramp */
+    if (tau <= T - r) {
+        double c = tau - r;
+        return s * (at_cruise + 0.5 * acc * r * r * c + 0.5 * v * c * c);
+    }
+    double at_decel = at_cruise + 0.5 * acc * r * r * cruise + 0.5 * v * cruise * cruise;
+    double q = T - (tau < T ? tau : T);         /* time to the core's end [s] */
+    double in_decel = D * (r - q) - acc * (r * r * r - q * q * q) / 6.0;
+    double after = tau > T ? D * (tau - T) : 0.0;
+    return s * (at_decel + in_decel + after);
+}
+
+/* Position [unit] at tau [s] after departure; velocity and acceleration out:
+ * the core itself, or its moving average over p->smooth. */
+static double eval_local(const mar_shape_profile *p, double tau, double *v, double *a)
+{
+    double w = p->smooth;
+    if (!(w > 0.0))
+        return eval_core(p, tau, v, a);
+    double x;
+    if (tau <= 0.0) {
+        x = p->x0;
+    } else if (tau >= p->duration) {
+        x = p->x1;                              /* the end is hit bit for bit */
+    } else {
+        /* the core starts at w/2: the window [tau - w/2, tau + w/2] is
+         * [tau - w, tau] in the core's time */
+        x = p->x0 + (core_integral(p, tau) - core_integral(p, tau - w)) / w;
+        double lo = p->x0 < p->x1 ? p->x0 : p->x1, hi = p->x0 < p->x1 ? p->x1 : p->x0;
+        x = x < lo ? lo : x > hi ? hi : x;
+    }
+    double v1, v0, a1, a0;
+    double x1 = eval_core(p, tau, &v1, &a1), x0 = eval_core(p, tau - w, &v0, &a0);
+    if (v != NULL)
+        *v = (x1 - x0) / w;
+    if (a != NULL)
+        *a = (v1 - v0) / w;
     return x;
 }
 
@@ -217,9 +383,11 @@ int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,
     if (opt == NULL || x == NULL || ext == NULL || n_ext == NULL || n_seg == NULL ||
         out == NULL || n == 0 || (seg == NULL && seg_cap > 0))
         return -EINVAL;
-    double T = opt->period, vmax = opt->max_speed, amax = opt->max_accel;
+    double T = opt->period, vmax = opt->max_speed, amax = opt->max_accel, lag = opt->lag;
     if (!finite_positive(T) || !finite_positive(vmax) || !finite_positive(amax) ||
         !isfinite(opt->pos_min) || !isfinite(opt->pos_max) || !(opt->pos_min <= opt->pos_max) ||
+        !isfinite(lag) || lag < 0.0 || !isfinite(opt->pos_margin) || opt->pos_margin < 0.0 ||
+        opt->first_depart < 0 ||
         (opt->policy != MAR_SHAPE_REDUCE && opt->policy != MAR_SHAPE_BORROW &&
          opt->policy != MAR_SHAPE_REJECT))
         return -EINVAL;
@@ -233,6 +401,10 @@ int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,
     size_t count = *n_ext - 1;
     if (seg_cap < count)
         return -ENOSPC;
+    /* where a move may end: the limits less the margin (their middle if that is empty) */
+    double lo = opt->pos_min + opt->pos_margin, hi = opt->pos_max - opt->pos_margin;
+    if (lo > hi)
+        lo = hi = 0.5 * (opt->pos_min + opt->pos_max);
 
     int infeasible = 0;
     double start = ext[0].value;                /* planned position at the rest [unit] */
@@ -240,39 +412,49 @@ int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,
     for (size_t i = 0; i < count; ++i) {
         const mar_shape_extremum *a = &ext[i], *b = &ext[i + 1];
         mar_shape_segment *s = &seg[i];
-        int64_t depart = a->rest_end;           /* nominal: hold the taught rest [tick] */
-        double D = b->value - start;            /* [unit] */
-        double reach = mar_shape_reach((double)(b->tick - depart) * T, vmax, amax);
-        double end = b->value;
-        int action = 0;
-        s->shortfall = 0.0;
+        int64_t earliest = a->tick;             /* the earliest departure [tick] */
+        if (i == 0 && opt->first_depart > earliest)
+            earliest = opt->first_depart < b->tick ? opt->first_depart : b->tick - 1;
+        int64_t depart = a->rest_end > earliest ? a->rest_end : earliest;  /* nominal [tick] */
+        double want = b->value < lo ? lo : b->value > hi ? hi : b->value;  /* [unit] */
+        double D = want - start;                /* [unit] */
+        double reach = mar_shape_reach_lag((double)(b->tick - depart) * T, vmax, amax, lag, NULL);
+        double end = want;
+        int action = want != b->value ? MAR_SHAPE_ACT_REDUCED : 0;
+        s->shortfall = fabs(b->value - want);
         if (!fits(fabs(D), reach)) {
-            ++infeasible;
-            s->shortfall = fabs(D) - reach;
+            s->shortfall += fabs(D) - reach;
             if (opt->policy == MAR_SHAPE_BORROW) {
                 /* the latest departure, not before the climax, that fits */
-                double need = mar_shape_min_time(D, vmax, amax);     /* [s] */
+                double need = mar_shape_min_time(D, vmax, amax);     /* [s], a lower bound */
                 double ticks = ceil(need / T);
-                int64_t d = ticks < (double)(b->tick - a->tick) ? b->tick - (int64_t)ticks : a->tick;
+                int64_t d = ticks < (double)(b->tick - earliest) ? b->tick - (int64_t)ticks : earliest;
                 if (d > depart)
                     d = depart;
-                while (d > a->tick &&
-                       !fits(fabs(D), mar_shape_reach((double)(b->tick - d) * T, vmax, amax)))
+                while (d > earliest &&
+                       !fits(fabs(D), mar_shape_reach_lag((double)(b->tick - d) * T, vmax, amax,
+                                                          lag, NULL)))
                     --d;
                 if (d < depart)
                     action |= MAR_SHAPE_ACT_BORROWED;
                 depart = d;
-                reach = mar_shape_reach((double)(b->tick - depart) * T, vmax, amax);
+                reach = mar_shape_reach_lag((double)(b->tick - depart) * T, vmax, amax, lag, NULL);
             }
             if (!fits(fabs(D), reach)) {
                 end = start + (D > 0.0 ? reach : -reach);
+                while (fabs(end - start) > reach)   /* rounding, far from 0 with a small reach */
+                    end = nextafter(end, start);
                 action |= MAR_SHAPE_ACT_REDUCED;
             }
+        }
+        if (action != 0) {
+            ++infeasible;
             if (opt->policy == MAR_SHAPE_REJECT)
                 action |= MAR_SHAPE_ACT_REJECTED;
         }
         double duration = (double)(b->tick - depart) * T;           /* [s] */
-        r = mar_shape_plan(start, end, (double)depart * T, duration, vmax, amax, &s->profile);
+        r = mar_shape_plan_lag(start, end, (double)depart * T, duration, vmax, amax, lag,
+                               &s->profile);
         if (r != 0)                             /* cannot happen: end is within reach */
             return r < 0 ? r : -EDOM;
         s->from_tick = a->tick;

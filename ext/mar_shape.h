@@ -33,17 +33,23 @@ typedef enum {
 #define MAR_SHAPE_ACT_REJECTED 4   /* infeasible under MAR_SHAPE_REJECT */
 
 /* One rest-to-rest move: x(t0) = x0, x(t0 + duration) = x1, velocity 0 at
- * both ends. Ramps of constant acceleration +-accel [unit/s^2] of length
- * ramp [s] at each end, and between them constant speed peak_speed [unit/s]
- * (none when ramp == duration / 2: a triangle). */
+ * both ends. Its core is a parabolic move over duration - smooth, from
+ * t0 + smooth/2: ramps of constant acceleration +-accel [unit/s^2] of
+ * length ramp [s] at each end, and between them constant speed peak_speed
+ * [unit/s] (none when ramp is half the core: a triangle). With smooth > 0
+ * the move is the moving average of the core over a window of smooth [s]:
+ * the acceleration then changes at a finite jerk and is 0 at both ends, so
+ * the engine's lag feed-forward (command = x + lag * x') has no step in
+ * velocity (docs/shaping.md). */
 typedef struct {
     double t0;          /* departure [s], from the first tick of the show */
     double duration;    /* T [s], > 0 */
     double x0;          /* start position [unit] */
     double x1;          /* end position [unit] */
-    double accel;       /* magnitude of the ramp acceleration [unit/s^2] */
-    double peak_speed;  /* magnitude of the cruise speed [unit/s] */
-    double ramp;        /* length of each ramp [s], <= duration / 2 */
+    double accel;       /* magnitude of the core's ramp acceleration [unit/s^2] */
+    double peak_speed;  /* magnitude of the core's cruise speed [unit/s] */
+    double ramp;        /* length of each ramp of the core [s] */
+    double smooth;      /* width of the moving average [s], 0 <= smooth < duration */
 } mar_shape_profile;
 
 /* A point of rest: an extremum of the taught trajectory, or an end. */
@@ -78,6 +84,12 @@ typedef struct {
     double prominence;      /* smallest counted excursion [unit], > 0 */
     double rest_tolerance;  /* rest band around an extremum [unit], >= 0 */
     int policy;             /* mar_shape_policy */
+    double lag;             /* the engine's lag feed-forward tau [s] (command = x + lag * x'),
+                               >= 0; 0: the command is the show itself */
+    double pos_margin;      /* a move ends at least this far inside [pos_min, pos_max]
+                               [unit], >= 0: room for the command's lead over the show */
+    int64_t first_depart;   /* the first move leaves no earlier than this tick [tick], >= 0:
+                               the command, sampled ahead, starts at rest */
 } mar_shape_options;
 
 /* Largest distance |D| [unit] a rest-to-rest move of duration T [s] can
@@ -86,6 +98,25 @@ typedef struct {
  *   amax*T^2/4            otherwise (triangle at amax).
  * 0 for T <= 0; NaN for bad limits. */
 double mar_shape_reach(double duration, double max_speed, double max_accel);
+
+/* The limits a move with smoothing window w [s] is planned to, so that its
+ * command x + lag * x' keeps |speed| <= vmax and |accel| <= amax: the core
+ * cruises at least w between its ramps, so each corner of its acceleration
+ * (a step of at most a) becomes on its own a jerk of a/w, which the
+ * feed-forward turns into lag * a/w of acceleration: a <= amax * w / (w + lag),
+ * and at most vmax / (2 lag). Where the smoothed ramp meets the cruise the
+ * command's speed exceeds the core's by at most a * lag^2 / (2w) (lag <= w)
+ * or a * (lag - w/2): the speed is vmax less that. lag = 0: vmax and amax. */
+void mar_shape_lag_limits(double smooth, double lag, double max_speed, double max_accel,
+                          double *speed, double *accel);
+
+/* Largest distance [unit] a rest-to-rest move of duration T [s] covers when
+ * its command x + lag * x' must keep the limits: the best over the
+ * smoothing width w (written to *smooth [s] when not NULL) of a core of
+ * T - w at mar_shape_lag_limits(w) that cruises at least w. lag = 0:
+ * mar_shape_reach, smooth 0. NaN for bad limits. */
+double mar_shape_reach_lag(double duration, double max_speed, double max_accel, double lag,
+                           double *smooth);
 
 /* Shortest duration [s] of a rest-to-rest move over |distance| [unit]
  * (the inverse of mar_shape_reach). NaN for bad limits. */
@@ -100,6 +131,13 @@ double mar_shape_min_time(double distance, double max_speed, double max_accel);
  * (non-finite, duration <= 0, limits <= 0). */
 int mar_shape_plan(double x0, double x1, double t0, double duration,
                    double max_speed, double max_accel, mar_shape_profile *p);
+
+/* The same move for a lag feed-forward of lag [s]: the narrowest smoothing
+ * width (of those mar_shape_reach_lag tries) with which it fits, and the
+ * least-acceleration core that cruises at least that width, to the limits
+ * of mar_shape_lag_limits. lag = 0: mar_shape_plan. */
+int mar_shape_plan_lag(double x0, double x1, double t0, double duration,
+                       double max_speed, double max_accel, double lag, mar_shape_profile *p);
 
 /* Position [unit], velocity [unit/s] and acceleration [unit/s^2] of a move
  * at time t [s] (x0 before t0, x1 after t0 + duration; the position never
@@ -124,8 +162,10 @@ int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_
 
 /* Shape one axis: points of rest (mar_shape_extrema), then per pair of
  * consecutive points a move leaving at the end of the first point's rest
- * (the figure holds the taught rest) and arriving at the second point's
- * climax tick, at rest. An infeasible move is handled by opt->policy and
+ * (the figure holds the taught rest; the first move not before
+ * opt->first_depart) and arriving at the second point's climax tick, at
+ * rest, planned by mar_shape_plan_lag with opt->lag. A move's end is kept
+ * opt->pos_margin inside the position limits (reported as reduced). An infeasible move is handled by opt->policy and
  * always reported in its segment. out[0..n) receives the shaped trajectory
  * at every tick [unit]. Buffers: ext and seg of at least n entries each
  * (n - 1 segments at most). Returns the number of infeasible segments

@@ -13,7 +13,7 @@ from libc.math cimport NAN
 from libc.string cimport memcpy
 
 from marionette._cengine cimport *
-from marionette.errors import ArgumentError
+from marionette.errors import ArgumentError, EngineError
 
 cnp.import_array()
 
@@ -72,6 +72,7 @@ def record_dtype(size_t n_axes):
         ("flags", "<u4"), ("limited_axes", "<u4"),
         ("follow_state", "<i4"), ("node_alarms", "<u4"),
         ("command", "<f8", (n_axes,)),
+        ("excess", "<f8", (n_axes,)),     # target - command where the limits acted, else 0 [unit]
     ])
 
 
@@ -151,6 +152,9 @@ cdef class CoreEngine:
             raise MemoryError()
         self.n_axes = n_axes
         self.record_dtype = record_dtype(n_axes)
+        if self.record_dtype.itemsize != mar_engine_record_size(self.engine):
+            raise EngineError(f"record_dtype has {self.record_dtype.itemsize} bytes, the C "
+                             f"record {mar_engine_record_size(self.engine)}: they must match")
 
     def __dealloc__(self):
         if self.loop != NULL:

@@ -33,6 +33,7 @@ cdef extern from "mar_shape.h" nogil:
         double accel
         double peak_speed
         double ramp
+        double smooth
     ctypedef struct mar_shape_extremum:
         int64_t tick
         int64_t rest_end
@@ -58,8 +59,17 @@ cdef extern from "mar_shape.h" nogil:
         double prominence
         double rest_tolerance
         int policy
+        double lag
+        double pos_margin
+        int64_t first_depart
     double mar_shape_reach(double duration, double max_speed, double max_accel)
     double mar_shape_min_time(double distance, double max_speed, double max_accel)
+    double mar_shape_reach_lag(double duration, double max_speed, double max_accel, double lag,
+                               double *smooth)
+    void mar_shape_lag_limits(double smooth, double lag, double max_speed, double max_accel,
+                              double *speed, double *accel)
+    int mar_shape_plan_lag(double x0, double x1, double t0, double duration,
+                           double max_speed, double max_accel, double lag, mar_shape_profile *p)
     int mar_shape_plan(double x0, double x1, double t0, double duration,
                        double max_speed, double max_accel, mar_shape_profile *p)
     void mar_shape_eval(const mar_shape_profile *p, double t, double *x, double *v, double *a)
@@ -77,7 +87,7 @@ ACT_BORROWED = MAR_SHAPE_ACT_BORROWED
 ACT_REJECTED = MAR_SHAPE_ACT_REJECTED
 
 # A move, as mar_shape_profile.
-PROFILE_FIELDS = ("t0", "duration", "x0", "x1", "accel", "peak_speed", "ramp")
+PROFILE_FIELDS = ("t0", "duration", "x0", "x1", "accel", "peak_speed", "ramp", "smooth")
 EXTREMUM_DTYPE = np.dtype([
     ("tick", "i8"), ("rest_end", "i8"),     # climax and last tick of its rest [tick]
     ("value", "f8"),                        # taught position [unit]
@@ -93,6 +103,7 @@ SEGMENT_DTYPE = np.dtype([
     ("x0", "f8"), ("x1", "f8"),             # [unit]
     ("accel", "f8"), ("peak_speed", "f8"),  # [unit/s^2], [unit/s]
     ("ramp", "f8"),                         # [s]
+    ("smooth", "f8"),                       # moving-average window [s]
 ])
 
 
@@ -106,14 +117,31 @@ def min_time(double distance, double max_speed, double max_accel):
     return mar_shape_min_time(distance, max_speed, max_accel)
 
 
-def plan(double x0, double x1, double t0, double duration, double max_speed, double max_accel):
-    """(status, profile dict or None): 0 fits, INFEASIBLE, or a negative errno."""
+def reach_lag(double duration, double max_speed, double max_accel, double lag):
+    """(reach [unit], smoothing window [s]) of a rest-to-rest move whose
+    command x + lag*x' [lag: s] keeps the limits."""
+    cdef double w = 0.0
+    cdef double r = mar_shape_reach_lag(duration, max_speed, max_accel, lag, &w)
+    return r, w
+
+
+def lag_limits(double smooth, double lag, double max_speed, double max_accel):
+    """(speed [unit/s], accel [unit/s^2]) a core is planned to for a window smooth [s]."""
+    cdef double v = 0.0, a = 0.0
+    mar_shape_lag_limits(smooth, lag, max_speed, max_accel, &v, &a)
+    return v, a
+
+
+def plan(double x0, double x1, double t0, double duration, double max_speed, double max_accel,
+         double lag=0.0):
+    """(status, profile dict or None): 0 fits, INFEASIBLE, or a negative errno.
+    lag [s] > 0: planned for the command x + lag*x' (mar_shape_plan_lag)."""
     cdef mar_shape_profile p
-    cdef int r = mar_shape_plan(x0, x1, t0, duration, max_speed, max_accel, &p)
+    cdef int r = mar_shape_plan_lag(x0, x1, t0, duration, max_speed, max_accel, lag, &p)
     if r != 0:
         return r, None
     return r, {"t0": p.t0, "duration": p.duration, "x0": p.x0, "x1": p.x1,
-               "accel": p.accel, "peak_speed": p.peak_speed, "ramp": p.ramp}
+               "accel": p.accel, "peak_speed": p.peak_speed, "ramp": p.ramp, "smooth": p.smooth}
 
 
 cdef int _profile_from(prof, mar_shape_profile *p) except -1:
@@ -124,6 +152,7 @@ cdef int _profile_from(prof, mar_shape_profile *p) except -1:
     p.accel = prof["accel"]
     p.peak_speed = prof["peak_speed"]
     p.ramp = prof["ramp"]
+    p.smooth = prof["smooth"]
     return 0
 
 
@@ -170,8 +199,10 @@ def extrema(x, double prominence, double rest_tolerance):
 
 
 def shape_axis(x, double period, double max_speed, double max_accel, double pos_min,
-               double pos_max, double prominence, double rest_tolerance, str policy):
-    """Shape one axis's trajectory x [unit] (one sample per tick of period [s]).
+               double pos_max, double prominence, double rest_tolerance, str policy,
+               double lag=0.0, double pos_margin=0.0, int64_t first_depart=0):
+    """Shape one axis's trajectory x [unit] (one sample per tick of period [s]);
+    lag [s], pos_margin [unit], first_depart [tick]: mar_shape_options.
 
     Returns (status, shaped [unit], EXTREMUM_DTYPE array, SEGMENT_DTYPE array);
     status is the number of infeasible segments (>= 0) or a negative errno.
@@ -191,6 +222,9 @@ def shape_axis(x, double period, double max_speed, double max_accel, double pos_
     opt.prominence = prominence
     opt.rest_tolerance = rest_tolerance
     opt.policy = POLICIES[policy]
+    opt.lag = lag
+    opt.pos_margin = pos_margin
+    opt.first_depart = first_depart
     cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] out = np.empty(n)
     cdef mar_shape_extremum *ext = <mar_shape_extremum *>calloc(n, sizeof(mar_shape_extremum))
     cdef mar_shape_segment *seg = <mar_shape_segment *>calloc(n, sizeof(mar_shape_segment))
@@ -212,7 +246,7 @@ def shape_axis(x, double period, double max_speed, double max_accel, double pos_
             segs[i] = (s.from_tick, s.depart_tick, s.arrive_tick, s.target, s.shortfall,
                        s.reduced_by, s.action, s.profile.t0, s.profile.duration,
                        s.profile.x0, s.profile.x1, s.profile.accel, s.profile.peak_speed,
-                       s.profile.ramp)
+                       s.profile.ramp, s.profile.smooth)
         return r, out, extr, segs
     finally:
         free(ext)

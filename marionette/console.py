@@ -58,41 +58,23 @@ class RecordTap:
     """What the console takes from every flight record, as the drain thread
     hands them over: the newest live and stored loudness (the snapshot's
     live loudness is NaN in the ticks without a new frame), and limiter
-    activity by axis (the record itself only counts the limited axes): an
-    axis counts as limited in a tick when its command moved at its top speed
-    or acceleration (within 0.1 %) or stands at a position limit."""
+    activity by axis (the records' excess: not 0 where a limit acted)."""
 
     def __init__(self, config, period: float):
         self.period = period
         self.names = config.axis_names
-        self.lo = np.array([a.min for a in config.axes])
-        self.hi = np.array([a.max for a in config.axes])
-        self.vmax = np.array([a.max_speed for a in config.axes]) * 0.999
-        self.amax = np.array([a.max_accel for a in config.axes]) * 0.999
         self.total = np.zeros(len(self.names), dtype=np.int64)
         self.recent: deque = deque()          # (monotonic time [s], per-axis counts)
         self.limited_ticks = 0                # ticks the engine flagged as limited
-        self._last = None                     # the two newest commands
         self.loudness: tuple = (None, None)   # newest (live, stored) loudness
         self._lock = threading.Lock()
 
     def __call__(self, records: np.ndarray) -> None:      # on the drain thread
-        cmd = records["command"]
-        if self._last is not None:
-            cmd = np.vstack([self._last, cmd])
-        hit = np.zeros((max(len(cmd) - 2, 0), len(self.names)), dtype=bool)
-        if len(cmd) >= 3:
-            v = np.diff(cmd, axis=0) / self.period
-            a = np.diff(v, axis=0) / self.period
-            x = cmd[2:]
-            hit = (np.abs(v[1:]) >= self.vmax) | (np.abs(a) >= self.amax) \
-                | (x <= self.lo) | (x >= self.hi)
-        counts = hit.sum(axis=0)
+        counts = (records["excess"] != 0).sum(axis=0)
         live = records["live_loudness"][np.isfinite(records["live_loudness"])]
         with self._lock:
             self.loudness = (float(live[-1]) if len(live) else self.loudness[0],
                              float(records["stored_loudness"][-1]))
-            self._last = cmd[-2:].copy()
             self.total += counts
             self.limited_ticks += int(np.count_nonzero(records["flags"] & _core.FLAG_LIMITED))
             now = time.monotonic()

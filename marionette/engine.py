@@ -34,6 +34,7 @@ from marionette.transport.supervisor import LinkSupervisor
 
 LEAD_MODES = {"dead_time_lag": _core.LEAD_DEAD_TIME_LAG, "mean_delay": _core.LEAD_MEAN_DELAY,
               "none": _core.LEAD_NONE}
+DEFAULT_LEAD = "dead_time_lag"      # play's and shape's default too
 INTERPOLATIONS = {"cubic": _core.INTERP_CUBIC, "linear": _core.INTERP_LINEAR}
 PROTOCOLS = {"serial": _core.PROTOCOL_SERIAL, "can": _core.PROTOCOL_CAN}
 ON_LOST = {"flywheel": _core.ON_LOST_FLYWHEEL, "hold": _core.ON_LOST_HOLD}   # [follow] on_lost
@@ -124,7 +125,7 @@ class Engine:
     end of the show would (wait()).
     """
 
-    def __init__(self, config: FigureConfig, show: Show, *, lead: str = "dead_time_lag",
+    def __init__(self, config: FigureConfig, show: Show, *, lead: str = DEFAULT_LEAD,
                  interpolation: str = "cubic", output=None, protocol: str | None = None,
                  record=None, rate: float = 1.0, on_limits: str = "error", start_pose=None,
                  follow: str | None = None, poll: str = "all", follow_start: float | None = DEFAULT_START,

@@ -5,9 +5,16 @@ than the servo's top speed in the middle), so that the figure reaches every
 climax exactly at its taught tick, at rest, within the servo's speed and
 acceleration limits.
 
+The moves are planned for the command the engine will send: with the lead
+"dead_time_lag" it commands x + tau*x' ahead by the dead time, so each move
+is smoothed (finite jerk) and planned to limits that leave room for the
+feed-forward; the shaped show is then played through the engine in step
+mode to check that its limiter stays idle, and an axis where it would act
+is planned again with more headroom.
+
 The algorithm is C (ext/mar_shape.c, through marionette._shape); this module
-picks the defaults, runs it per axis and reports. Method, profile choice,
-feasibility and policies: docs/shaping.md.
+picks the defaults, runs it per axis, checks and reports. Method, profile
+choice, feasibility and policies: docs/shaping.md.
 """
 from __future__ import annotations
 
@@ -19,12 +26,20 @@ import numpy as np
 
 from marionette import _shape
 from marionette.config import FigureConfig
+from marionette.engine import DEFAULT_LEAD, LEAD_MODES, Engine
 from marionette.errors import ArgumentError, ShowError
+from marionette.limiter_report import limited_axes
 from marionette.show import Show, fit_to_figure
 
 POLICIES = ("reduce", "borrow", "reject")
 DEFAULT_PROMINENCE = 0.02       # of the axis's position range [1]
 DEFAULT_REST_TOLERANCE = 0.005  # of the axis's position range [1]
+HEADROOM = 0.95                 # first plan to this fraction of the limits where the engine
+                                # samples between ticks: its cubic interpolation adds a little [1]
+HEADROOM_EXACT = 1 - 1e-6       # ... and where it commands the samples themselves: rounding [1]
+HEADROOM_STEP = 0.8             # an axis the engine still limits is planned again to this
+                                # fraction of its previous headroom ... [1]
+HEADROOM_TRIES = 4              # ... at most this many times [1]
 
 
 @dataclass(frozen=True)
@@ -68,6 +83,10 @@ class AxisShape:
     max_accel: float         # the servo's top acceleration [unit/s^2]
     plan_speed: float = 0.0  # speed the moves were planned to [unit/s]
     plan_accel: float = 0.0  # acceleration the moves were planned to [unit/s^2]
+    lag: float = 0.0         # the lag feed-forward planned for [s]
+    headroom: float = 1.0    # fraction of the limits planned to after the engine check [1]
+    retried: bool = False    # planned again with less headroom: the engine limited it
+    limited: object = None   # limiter_report.AxisLimited: where the engine still limits, or None
     points: np.ndarray = field(repr=False, default=None)     # _shape.EXTREMUM_DTYPE
     moves: np.ndarray = field(repr=False, default=None)      # _shape.SEGMENT_DTYPE
 
@@ -81,7 +100,7 @@ class ShapeReport:
     figure: str
     axes: list[AxisShape]
     accel_fraction: float = 1.0   # planned to this fraction of each top acceleration [1]
-    lag_headroom: bool = False    # speed planned to leave room for the lag feed-forward
+    lead: str = DEFAULT_LEAD      # the engine's lead mode the show was planned for
 
     @property
     def infeasible(self) -> list[InfeasibleSegment]:
@@ -106,14 +125,26 @@ class ShapeReport:
             lines.append(f"  {a.axis:<18}{a.unit:>5}{a.prominence:>12.4g}{a.extrema:>9d}"
                          f"{a.segments:>7d}{len(a.infeasible):>12d}"
                          f"{a.peak_speed / a.max_speed:>11.2f}{a.peak_accel / a.max_accel:>11.2f}")
-        if self.accel_fraction != 1.0 or self.lag_headroom:
-            lines.append(f"  planned to {self.accel_fraction:g} of each top acceleration"
-                         + (", top speed less tau * that acceleration (lag headroom)"
-                            if self.lag_headroom else ""))
+        lines.append(f"  planned for the engine's command with lead {self.lead}"
+                     + (f", to {self.accel_fraction:g} of each top acceleration"
+                        if self.accel_fraction != 1.0 else ""))
+        again = [f"{a.axis} {a.headroom:.2f}" for a in self.axes if a.retried]
+        if again:
+            lines.append("  planned again with more headroom, as played through the engine: "
+                         + ", ".join(again))
         bad = self.infeasible
         lines.append(f"  {len(bad)} of {self.segments} moves infeasible")
         lines.extend(f"    {seg.describe()}" for seg in bad)
+        limited = self.limited
+        lines.append(f"  the engine's limits act on {sum(a.ticks for a in limited)} axis-ticks "
+                     "of the shaped show" + (":" if limited else ""))
+        lines.extend(f"    {a.describe()}" for a in limited)
         return "\n".join(lines)
+
+    @property
+    def limited(self) -> list:
+        """limiter_report.AxisLimited of the axes the engine still limits."""
+        return [a.limited for a in self.axes if a.limited is not None]
 
 
 def _per_axis(value, config: FigureConfig, default_fraction: float, what: str,
@@ -145,26 +176,33 @@ _ACTIONS = {_shape.ACT_REDUCED: "reduced", _shape.ACT_BORROWED: "borrowed",
             _shape.ACT_BORROWED | _shape.ACT_REDUCED: "borrowed+reduced"}
 
 
-def planning_limits(axis, accel_fraction: float = 1.0, lag_headroom: bool = False
-                    ) -> tuple[float, float]:
-    """(speed [unit/s], acceleration [unit/s^2]) the moves of an axis are planned to.
+def command_model(axis, lead: str, period: float) -> tuple[float, float, int]:
+    """How the engine turns the show into axis's command (ext/mar_engine.c,
+    mar_engine_create): (lag feed-forward [s], how far ahead it samples [s],
+    the first tick a move may leave so that the first command is at rest
+    [tick]: the cubic interpolation at ahead/period reads two samples on; 0
+    when the engine commands the samples themselves)."""
+    if lead not in LEAD_MODES:
+        raise ArgumentError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
+    lag = axis.time_constant if lead == "dead_time_lag" else 0.0
+    ahead = {"none": 0.0, "mean_delay": axis.dead_time + axis.time_constant,
+             "dead_time_lag": axis.dead_time}[lead]
+    return lag, ahead, int(math.floor(ahead / period)) + 2 if ahead > 0 else 0
 
-    accel_fraction of the servo's top acceleration; with lag_headroom, the
-    speed leaves room for the engine's lag feed-forward (lead
-    "dead_time_lag": command = x + tau*x'): speed + tau*accel <= top speed,
-    with tau*accel at most half the top speed."""
-    accel = accel_fraction * axis.max_accel
-    speed = axis.max_speed
-    if lag_headroom and axis.time_constant > 0:
-        accel = min(accel, 0.5 * axis.max_speed / axis.time_constant)
-        speed = axis.max_speed - axis.time_constant * accel
-    return speed, accel
+
+def position_margin(axis, lag: float, accel: float, period: float) -> float:
+    """How far inside its position limits a move must end [unit]: the command
+    x + lag*x' overshoots the end by up to lag^2 * accel / 2 (accel: the
+    planned acceleration [unit/s^2]), and the limiter's braking bound wants
+    about one tick at top acceleration more (max_accel * period^2)."""
+    return 0.5 * lag * lag * accel + axis.max_accel * period * period
 
 
 def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
                prominence=None, rest_tolerance=None, *, accel_fraction: float = 1.0,
-               lag_headroom: bool = False) -> tuple[Show, ShapeReport]:
-    """Join the points of rest of every axis by timed parabolic moves.
+               lead: str = DEFAULT_LEAD) -> tuple[Show, ShapeReport]:
+    """Join the points of rest of every axis by timed moves that the engine
+    can command within every limit.
 
     prominence [unit]: the smallest excursion that counts as a point of rest
     (default 2 % of each axis's position range); rest_tolerance [unit]: the
@@ -174,11 +212,13 @@ def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
     policy: what to do with a move that the servo cannot make in its time:
     "reduce" its amplitude, "borrow" time from the preceding rest (then
     reduce), or "reject" (raise ShowError naming every such move).
-    accel_fraction (0 < f <= 1) and lag_headroom plan the moves below the
-    servo's limits (planning_limits), leaving room for the engine's lag
-    feed-forward: a show to be played with lead "dead_time_lag" keeps its
-    climaxes on time only if the compensated command stays inside the limits
-    (docs/shaping.md; marionette.bench.climax measures it).
+    accel_fraction (0 < f <= 1): plan to that fraction of each top
+    acceleration. lead: the engine's lead mode the show will be played with
+    (Engine(lead=...)); the moves are planned for the command it makes
+    (command_model), and the shaped show is played through the engine in
+    step mode at rate 1: an axis the limits would still cut is planned again
+    with more headroom (HEADROOM_STEP, HEADROOM_TRIES), and what remains is
+    reported (ShapeReport.limited).
 
     Returns the shaped show (axes in the figure's order) and the report.
     """
@@ -186,50 +226,86 @@ def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
         raise ArgumentError(f"policy must be one of {POLICIES}, not {policy!r}")
     if not (isinstance(accel_fraction, (int, float)) and 0 < accel_fraction <= 1):
         raise ArgumentError(f"accel_fraction must be in (0, 1], not {accel_fraction!r}")
+    if lead not in LEAD_MODES:
+        raise ArgumentError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
     show = fit_to_figure(show, config)
     proms = _per_axis(prominence, config, DEFAULT_PROMINENCE, "prominence", positive=True)
     tols = _per_axis(rest_tolerance, config, DEFAULT_REST_TOLERANCE, "rest_tolerance",
                      positive=False)
-    T = config.tick_period
     shaped = np.empty_like(show.positions)
     axes = []
-    for j, a in enumerate(config.axes):
-        vmax, amax = planning_limits(a, accel_fraction, lag_headroom)
-        status, out, points, moves = _shape.shape_axis(
-            np.ascontiguousarray(show.positions[j]), T, vmax, amax,
-            a.min, a.max, proms[j], tols[j], policy)
-        if status < 0:
-            raise ShowError(f"{show.path}: axis {a.name!r}: shaping failed "
-                            f"(status {status}: {_status_text(status)})")
-        shaped[j] = out
-        infeasible = []
-        for m in moves[moves["shortfall"] > 0]:
-            action = "rejected" if policy == "reject" else _ACTIONS[int(m["action"]) & 3]
-            nominal = int(points["rest_end"][np.searchsorted(points["tick"], m["from_tick"])])
-            infeasible.append(InfeasibleSegment(
-                axis=a.name, unit=a.unit, time_s=float(m["arrive_tick"]) * T,
-                depart_s=float(m["depart_tick"]) * T, shortfall=float(m["shortfall"]),
-                action=action, reduced_by=float(m["reduced_by"]),
-                borrowed_ticks=nominal - int(m["depart_tick"])))
-        axes.append(AxisShape(
-            axis=a.name, unit=a.unit, prominence=proms[j], rest_tolerance=tols[j],
-            extrema=len(points), segments=len(moves), infeasible=infeasible,
-            peak_speed=float(moves["peak_speed"].max()) if len(moves) else 0.0,
-            peak_accel=float(moves["accel"].max()) if len(moves) else 0.0,
-            max_speed=a.max_speed, max_accel=a.max_accel, plan_speed=vmax, plan_accel=amax,
-            points=points, moves=moves))
+    for j in range(len(config.axes)):
+        exact = command_model(config.axes[j], lead, config.tick_period)[1] == 0
+        shaped[j], ax = _shape_one(show, config, j, policy, proms[j], tols[j], accel_fraction,
+                                   lead, HEADROOM_EXACT if exact else HEADROOM)
+        axes.append(ax)
+    for attempt in range(HEADROOM_TRIES + 1):
+        found = {a.axis: a for a in _engine_limits(replace(show, positions=shaped), config, lead)}
+        for ax in axes:
+            ax.limited = found.get(ax.axis)
+        if not found or attempt == HEADROOM_TRIES:
+            break
+        for j, ax in enumerate(axes):
+            if ax.limited is not None:
+                shaped[j], axes[j] = _shape_one(show, config, j, policy, proms[j], tols[j],
+                                                accel_fraction, lead, ax.headroom * HEADROOM_STEP)
+                axes[j].retried = True
     report = ShapeReport(policy=policy, show=show.path, figure=config.name, axes=axes,
-                            accel_fraction=accel_fraction, lag_headroom=lag_headroom)
+                         accel_fraction=accel_fraction, lead=lead)
     bad = report.infeasible
     if policy == "reject" and bad:
         raise ShowError(f"{show.path}: {len(bad)} move(s) exceed the servo limits of "
                         f"{config.source} (policy 'reject'):\n"
                         + "\n".join(f"  {seg.describe()}" for seg in bad))
     changes = list(show.changes)
-    changes.append(f"shaped (policy {policy}): {report.segments} moves between points of rest, "
-                   f"{len(bad)} infeasible")
+    changes.append(f"shaped (policy {policy}, lead {lead}): {report.segments} moves between "
+                   f"points of rest, {len(bad)} infeasible")
     source = f"{show.source}; shaped, policy {policy}" if show.source else f"shaped, policy {policy}"
     return replace(show, positions=shaped, source=source, changes=changes), report
+
+
+def _shape_one(show: Show, config: FigureConfig, j: int, policy: str, prominence: float,
+               rest_tolerance: float, accel_fraction: float, lead: str, headroom: float
+               ) -> tuple[np.ndarray, AxisShape]:
+    """Axis j shaped for the engine's command with lead, to headroom [1] of its
+    top speed and of accel_fraction times its top acceleration."""
+    a = config.axes[j]
+    T = config.tick_period
+    lag, _, first_depart = command_model(a, lead, T)
+    vmax, amax = headroom * a.max_speed, headroom * accel_fraction * a.max_accel
+    status, out, points, moves = _shape.shape_axis(
+        np.ascontiguousarray(show.positions[j]), T, vmax, amax, a.min, a.max, prominence,
+        rest_tolerance, policy, lag, position_margin(a, lag, amax, T), first_depart)
+    if status < 0:
+        raise ShowError(f"{show.path}: axis {a.name!r}: shaping failed "
+                        f"(status {status}: {_status_text(status)})")
+    infeasible = []
+    for m in moves[moves["shortfall"] > 0]:
+        action = "rejected" if policy == "reject" else _ACTIONS[int(m["action"]) & 3]
+        nominal = int(points["rest_end"][np.searchsorted(points["tick"], m["from_tick"])])
+        if m["from_tick"] == points["tick"][0]:     # the first move waits for the lead
+            nominal = max(nominal, min(first_depart, int(m["arrive_tick"]) - 1))
+        infeasible.append(InfeasibleSegment(
+            axis=a.name, unit=a.unit, time_s=float(m["arrive_tick"]) * T,
+            depart_s=float(m["depart_tick"]) * T, shortfall=float(m["shortfall"]),
+            action=action, reduced_by=float(m["reduced_by"]),
+            borrowed_ticks=nominal - int(m["depart_tick"])))
+    return out, AxisShape(
+        axis=a.name, unit=a.unit, prominence=prominence, rest_tolerance=rest_tolerance,
+        extrema=len(points), segments=len(moves), infeasible=infeasible,
+        peak_speed=float(moves["peak_speed"].max()) if len(moves) else 0.0,
+        peak_accel=float(moves["accel"].max()) if len(moves) else 0.0,
+        max_speed=a.max_speed, max_accel=a.max_accel, plan_speed=vmax, plan_accel=amax,
+        lag=lag, headroom=headroom, points=points, moves=moves)
+
+
+def _engine_limits(show: Show, config: FigureConfig, lead: str) -> list:
+    """Where the engine's limits cut the commands of show played at rate 1."""
+    with Engine(config, show, lead=lead, record=True) as engine:
+        engine.step(show.n_ticks)
+        records = engine.records()
+    return limited_axes(records, config.axis_names, [a.unit for a in config.axes],
+                        config.tick_period)
 
 
 def _status_text(status: int) -> str:

@@ -293,8 +293,9 @@ def fast_show():
 
 
 def test_shape_show_reports_and_policies():
+    # lead "none": the command is the show itself, so the moves are planned to the full limits
     config, show = fast_show()
-    shaped, report = shape_show(show, config)
+    shaped, report = shape_show(show, config, lead="none")
     assert shaped.positions.shape == show.positions.shape
     a1 = report.axis("a1")
     assert report.axis("a0").infeasible == [] and len(a1.infeasible) == 1
@@ -304,14 +305,14 @@ def test_shape_show_reports_and_policies():
     assert shaped.positions[1, 114] == pytest.approx(0.9 - 0.27)
     text = str(report)
     assert "a1" in text and "1 of" in text and "2.280 s" in text and "short by 0.63" in text
-    assert any("shaped (policy reduce)" in c for c in shaped.changes)
+    assert any("shaped (policy reduce, lead none)" in c for c in shaped.changes)
     # borrow: the climax value is kept
-    shaped_b, report_b = shape_show(show, config, policy="borrow")
+    shaped_b, report_b = shape_show(show, config, policy="borrow", lead="none")
     assert report_b.infeasible[0].action == "borrowed" and shaped_b.positions[1, 114] == 0.0
     assert report_b.infeasible[0].borrowed_ticks > 0
     # reject: names the axis, the time and the shortfall
     with pytest.raises(ShowError, match=r"axis 'a1' at 2\.280 s: short by 0\.63"):
-        shape_show(show, config, policy="reject")
+        shape_show(show, config, policy="reject", lead="none")
     with pytest.raises(ValueError):
         shape_show(show, config, policy="stretch")
     with pytest.raises(ValueError):
@@ -323,11 +324,13 @@ def test_prominence_and_headroom_options():
     _, coarse = shape_show(show, config, prominence=0.95)
     _, fine = shape_show(show, config, prominence={"a0": 0.05})
     assert coarse.axis("a0").extrema < fine.axis("a0").extrema
-    _, slow = shape_show(show, config, accel_fraction=0.25, lag_headroom=True)
-    a = config.axes[0]
-    assert slow.axes[0].plan_accel == pytest.approx(0.25 * a.max_accel)
-    assert slow.axes[0].plan_speed == pytest.approx(a.max_speed - a.time_constant * 0.25 * a.max_accel)
-    assert slow.axes[0].peak_accel <= slow.axes[0].plan_accel * (1 + REL)
+    _, slow = shape_show(show, config, accel_fraction=0.25)
+    a, ax = config.axes[0], slow.axes[0]
+    assert ax.plan_accel == pytest.approx(0.25 * ax.headroom * a.max_accel)
+    assert ax.plan_speed == pytest.approx(ax.headroom * a.max_speed)
+    assert ax.lag == a.time_constant and ax.peak_accel <= ax.plan_accel * (1 + REL)
+    with pytest.raises(ValueError, match="lead"):
+        shape_show(show, config, lead="ahead")
 
 
 def test_demo_show_on_the_bundled_figure_keeps_every_limit():

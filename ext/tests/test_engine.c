@@ -443,7 +443,8 @@ static void test_source_lost(void)
     mar_engine_step(e, 3);
     mar_record recs[6];
     size_t rs = mar_engine_record_size(e), n;
-    unsigned char pbuf[6 * sizeof(mar_record) + 6 * sizeof(double)];
+    unsigned char pbuf[6 * (sizeof(mar_record) + 2 * sizeof(double))];   /* 1 axis: command, excess */
+    CHECK(rs * 6 == sizeof pbuf, "record of %zu bytes", rs);
     n = mar_engine_drain_records(e, pbuf, 6);
     for (size_t i = 0; i < n; i++) {
         memcpy(&recs[i], pbuf + i * rs, sizeof recs[i]);

@@ -27,6 +27,7 @@ import numpy as np
 from marionette import _core
 from marionette.cli.options import image_file, input_file, output_file
 from marionette.errors import MarionetteError
+from marionette.limiter_report import limited_axes
 from marionette.music.follower import STATES
 from marionette.recorder import MAGIC, read_flight_record
 
@@ -98,49 +99,6 @@ def _node_addresses(header: dict) -> list[int] | None:
     return None if config is None else sorted({a.node for a in config.axes})
 
 
-def _brake_speed(distance, a, T):
-    """mar_brake_speed (ext/mar_limits.c), elementwise."""
-    aT = a * T
-    return np.where(distance <= 0.0, 0.0,
-                    -aT + np.sqrt(np.maximum(aT * aT + 2.0 * a * distance, 0.0)))
-
-
-def limited_by_axis(header: dict, rec: np.ndarray):
-    """Which axes the limits acted on, tick by tick, as far as the record tells.
-
-    The record holds only how many axes were limited in a tick. Each tick's
-    command step is checked against the bounds mar_limit_step (ext/mar_limits.c)
-    puts on it, from the two commands before and the figure's limits: a step
-    that lies on a speed, acceleration or braking bound, or ends on a position
-    limit, was limited. Returns (hits (ticks, axes) bool, known (ticks,) bool:
-    the ticks that can be checked, i.e. with two whole ticks before), or None
-    when the figure cannot be read."""
-    config = _figure(header)
-    if config is None or len(rec) < 3:
-        return None
-    T = float(header["tick_period"])
-    x = rec["command"]
-    pos_min = np.array([a.min for a in config.axes])
-    pos_max = np.array([a.max for a in config.axes])
-    vmax = np.array([a.max_speed for a in config.axes])
-    amax = np.array([a.max_accel for a in config.axes])
-    x0, x1 = x[1:-1], x[2:]
-    v0 = (x[1:-1] - x[:-2]) / T                   # the engine's velocity after the tick before
-    v1 = (x1 - x0) / T
-    aT = amax * T
-    hi = np.minimum(np.minimum(vmax, v0 + aT), _brake_speed(pos_max - x0, amax, T))
-    lo = np.maximum(np.maximum(-vmax, v0 - aT), -_brake_speed(x0 - pos_min, amax, T))
-    tol = 8 * np.finfo(float).eps * (np.maximum(np.abs(x0), np.abs(x1)) + 1.0) / T
-    on_bound = ((np.abs(v1 - hi) <= tol) | (np.abs(v1 - lo) <= tol)
-                | (x1 == pos_max) | (x1 == pos_min))
-    hits = np.zeros(x.shape, dtype=bool)
-    hits[2:] = on_bound & (rec["limited_axes"][2:, None] > 0)
-    known = np.zeros(len(rec), dtype=bool)
-    steps = np.diff(rec["tick"]) == 1
-    known[2:] = steps[1:] & steps[:-1]
-    return hits, known
-
-
 def _runs(mask: np.ndarray) -> int:
     """How many runs of True."""
     m = np.asarray(mask, dtype=np.int8)
@@ -191,7 +149,7 @@ def summary(header: dict, rec: np.ndarray, path) -> list[str]:
                f"({np.mean(hit):.1%}), at most {int(limited.max())} axes in one tick"
                + (f", first at {t[np.argmax(hit)]:.2f} s" if hit.any() else ""))
     if hit.any():
-        out.extend(_limited_lines(header, rec, hit))
+        out.extend(_limited_lines(header, rec))
     bad = (rec["flags"] & BIT["bad_input"]) != 0
     out.append(f"  bad inputs refused: on {int(bad.sum())} ticks")
     alarms = rec["node_alarms"]
@@ -223,26 +181,14 @@ def summary(header: dict, rec: np.ndarray, path) -> list[str]:
     return out
 
 
-def _limited_lines(header: dict, rec: np.ndarray, hit: np.ndarray) -> list[str]:
+def _limited_lines(header: dict, rec: np.ndarray) -> list[str]:
+    """Per limited axis (the records' excess): ticks, runs in show time, largest excess."""
     names = header["axis_names"]
-    found = limited_by_axis(header, rec)
-    if found is None:
-        return [f"    by axis: not recorded, and the figure {header.get('config', '?')} "
-                "(to tell them from the commands) cannot be read or has other axes"]
-    hits, known = found
-    checked = hit & known
-    agree = checked & (hits.sum(axis=1) == rec["limited_axes"])
-    counts = hits.sum(axis=0)
-    order = [j for j in np.argsort(-counts, kind="stable") if counts[j]]
-    by_axis = ", ".join(f"{names[j]} {int(counts[j])}" for j in order) or "-"
-    lines = [f"    by axis [axis-ticks]: {by_axis}",
-             f"    (told from the commands and the figure's limits: the record keeps only the count; "
-             f"the counts agree on {int(agree.sum())} of {int(checked.sum())} limited ticks"
-             + (f"; {int(np.sum(hit & ~known))} limited ticks without two ticks before are not "
-                f"told apart ({int(rec['limited_axes'][hit & ~known].sum())} axis-ticks)"
-                if np.any(hit & ~known) else "")
-             + "; by how much the limits cut is not recorded)"]
-    return lines
+    config = _figure(header)
+    units = [a.unit for a in config.axes] if config is not None else [""] * len(names)
+    found = limited_axes(rec, names, units, float(header["tick_period"]))
+    return [f"    by axis [axis-ticks]: " + ", ".join(f"{a.axis} {a.ticks}" for a in found)] + \
+        [f"    {a.describe()}" for a in found]
 
 
 def csv_columns(header: dict, rec: np.ndarray) -> list[str]:
@@ -318,16 +264,16 @@ def plot(path, header: dict, rec: np.ndarray, axes: list[str], source) -> None:
     ax.set_title("(B) music follower state (red: not followed)", fontsize=9, loc="left")
 
     ax = panels[2]
-    found = limited_by_axis(header, rec) if np.any(rec["limited_axes"]) else None
-    hit_axes = [j for j in range(len(names)) if found is not None and found[0][:, j].any()]
-    if hit_axes:                # which axes, told from the commands (limited_by_axis)
+    hits = rec["excess"] != 0
+    hit_axes = [j for j in range(len(names)) if hits[:, j].any()]
+    if hit_axes:
         for row, j in enumerate(hit_axes):
-            ticks = found[0][:, j]
+            ticks = hits[:, j]
             ax.plot(t[ticks], np.full(int(ticks.sum()), row), "|", ms=7, color="tab:red")
         ax.set_yticks(range(len(hit_axes)), [names[j] for j in hit_axes], fontsize=6)
         ax.set_ylim(-0.7, len(hit_axes) - 0.3)
-        ax.set_title("(C) axes a limit acted on (told from the commands; grey: how many, "
-                     "right scale)", fontsize=9, loc="left")
+        ax.set_title("(C) axes a limit acted on (grey: how many, right scale)", fontsize=9,
+                     loc="left")
         ax2 = ax.twinx()
         ax2.step(t, rec["limited_axes"], where="post", color="0.6", lw=0.8)
         ax2.set_ylabel("axes", color="0.5")

@@ -15,7 +15,8 @@ from marionette.cli.options import (PRIORITY, Number, figure_and_show, figure_ar
                                     output_file)
 from marionette.cli.sync_sim import add_start_argument
 from marionette.console import open_view
-from marionette.engine import FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, MAX_RATE, Engine
+from marionette import limiter_report
+from marionette.engine import DEFAULT_LEAD, FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, MAX_RATE, Engine
 from marionette.errors import MarionetteError
 from marionette.faults import FaultWatcher, summary as fault_summary
 from marionette.music.report import (LostWatcher, choose_latency, follow_share, lost_events,
@@ -45,7 +46,7 @@ def register(sub) -> None:
                    help=f"ticks to run, {TICKS.range} (default: the whole show)")
     p.add_argument("--rate", type=RATE, default=1.0,
                    help=f"playback rate [show ticks per tick], {RATE.range} (default 1: as taught)")
-    p.add_argument("--lead", choices=sorted(LEAD_MODES), default="dead_time_lag",
+    p.add_argument("--lead", choices=sorted(LEAD_MODES), default=DEFAULT_LEAD,
                    help="how far ahead each servo is sent its setpoint: dead_time_lag (default): "
                         "x(t + Td) + tau x'(t + Td), which cancels the dead time and the lag; "
                         "mean_delay: x(t + Td + tau), the paper's; none: x(t)")
@@ -217,7 +218,8 @@ def run(args) -> int:
         print(f"  show changed: {change}")
     print(f"  flight recorder: {stats['recorded']} records, {stats['records_dropped']} dropped"
           + (f", written to {args.record}" if args.record else ""))
-    print(f"  limits acted on {stats['limited']} axis-ticks; bad inputs refused: {stats['bad_input']}")
+    print(f"  bad inputs refused: {stats['bad_input']}")
+    limiter_report.print_summary(records, config, period, json_lines=args.json)
     if args.output or args.link:
         print(f"  output {args.output or args.link}: {stats['sink_frames']} ticks sent, "
               f"{stats['sink_bytes']} bytes, {stats['sink_errors']} lost")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from marionette.cli.options import ACCEL_FRACTION, CONFIG_HELP, Number, input_file, output_file
 from marionette.config import load_config
+from marionette.engine import DEFAULT_LEAD, LEAD_MODES
 from marionette.show import load_show
 
 
@@ -23,9 +24,9 @@ def register(sub) -> None:
                    help="rest band around an extremum [axis unit] (default: 0.5 %% of the range)")
     p.add_argument("--accel-fraction", type=ACCEL_FRACTION, default=1.0,
                    help=f"plan the moves to this fraction of each top acceleration, {ACCEL_FRACTION.range}")
-    p.add_argument("--lag-headroom", action="store_true",
-                   help="plan the speed to leave room for the lag feed-forward of lead "
-                        "dead_time_lag (top speed - time_constant * acceleration)")
+    p.add_argument("--lead", choices=sorted(LEAD_MODES), default=DEFAULT_LEAD,
+                   help="the lead the show will be played with (play --lead): the moves are "
+                        "planned for the command it makes (default: %(default)s)")
     p.set_defaults(run=run)
 
 
@@ -35,7 +36,7 @@ def run(args) -> int:
     show = load_show(args.show, config)
     shaped, report = shape_show(show, config, policy=args.policy, prominence=args.prominence,
                                 rest_tolerance=args.rest_tolerance,
-                                accel_fraction=args.accel_fraction, lag_headroom=args.lag_headroom)
+                                accel_fraction=args.accel_fraction, lead=args.lead)
     shaped.save(args.output)
     print(report)
     print(f"wrote {args.output}")

@@ -20,6 +20,7 @@ import numpy as np
 
 from marionette.cli.options import ACCEL_FRACTION, CONFIG_HELP, Number, input_file, output_file
 from marionette.config import load_config
+from marionette.engine import DEFAULT_LEAD, LEAD_MODES
 from marionette.errors import ArgumentError, TeachError
 from marionette.music.bands import wav_bands
 from marionette.music.feature import wav_frames
@@ -145,7 +146,7 @@ def _teach(args, progress: Progress) -> int:
     report = None
     if not args.no_shape:
         show, report = shape_show(show, config, policy=args.policy,
-                                  accel_fraction=args.accel_fraction, lag_headroom=args.lag_headroom)
+                                  accel_fraction=args.accel_fraction, lead=args.lead)
     stage_values["shaped"] = show.positions
 
     progress.step("music")
@@ -240,8 +241,12 @@ def _report(args, config, settings, stages, show, report, untaught, music_frames
         print("  shaping: skipped (--no-shape)")
     else:
         bad = report.infeasible
+        limited = report.limited
         print(f"  segments shaped: {report.segments} moves between points of rest "
-              f"(policy {report.policy}); infeasible: {len(bad)}")
+              f"(policy {report.policy}, lead {report.lead}); infeasible: {len(bad)}; the engine's "
+              f"limits act on {sum(a.ticks for a in limited)} axis-ticks of the show")
+        for a in limited:
+            print(f"    limited: {a.describe()}")
         for seg in bad[:args.list_infeasible]:
             print(f"    {seg.describe()}")
         if len(bad) > args.list_infeasible:
@@ -279,8 +284,9 @@ def register(subparsers) -> None:
                         "borrow time from the preceding rest, or reject (error)")
     p.add_argument("--accel-fraction", type=ACCEL_FRACTION, default=1.0,
                    help=f"plan the moves to this fraction of each top acceleration, {ACCEL_FRACTION.range}")
-    p.add_argument("--lag-headroom", action="store_true",
-                   help="plan the speed to leave room for the lag feed-forward (as `marionette shape`)")
+    p.add_argument("--lead", choices=sorted(LEAD_MODES), default=DEFAULT_LEAD,
+                   help="pragmatic filter: the lead the show will be played with (as "
+                        "`marionette shape`; default: %(default)s)")
     p.add_argument("--no-shape", action="store_true", help="skip the pragmatic filter")
     p.add_argument("--on-limits", choices=LIMIT_POLICIES, default="error",
                    help="taught positions outside an axis's limits: error (default), clamp, compress")

@@ -1,0 +1,143 @@
+"""Shaping for the engine's command: a shaped show plays through the engine
+with its hard limiter idle, the climaxes reach the simulated servos on time,
+and play's summary names where the limits did act."""
+import numpy as np
+import pytest
+
+from marionette import _shape, load_config, load_show
+from marionette.bench import climax
+from marionette.demo import DEMO_SHOW
+from marionette.engine import Engine
+from marionette.limiter_report import WARN_AXIS_TICKS, limited_axes, summary
+from marionette.shape import command_model, shape_show
+from conftest import run_cli
+
+SEED = 20261202
+REL = 1e-9
+
+
+def test_lag_moves_keep_the_commands_limits_and_end_at_rest():
+    """Dense evaluation of random moves: the command x + lag*x' keeps
+    |speed| <= vmax and |accel| <= amax; the move itself ends at rest with no
+    acceleration, and reach_lag never exceeds the bare reach."""
+    rng = np.random.default_rng(SEED)
+    fitted = 0
+    for _ in range(400):
+        vmax, amax = 10 ** rng.uniform(-1, 0.5), 10 ** rng.uniform(0, 1.3)
+        lag, T = rng.uniform(0.01, 0.3), rng.uniform(0.1, 3.0)
+        reach, w = _shape.reach_lag(T, vmax, amax, lag)
+        assert 0 < w < T and 0 < reach <= _shape.reach(T, vmax, amax)
+        D = reach * rng.uniform(0.05, 1.3) * rng.choice([-1, 1])
+        status, p = _shape.plan(0.3, 0.3 + D, 1.0, T, vmax, amax, lag)
+        if abs(D) > reach * (1 + 1e-12):
+            assert status == _shape.INFEASIBLE
+            continue
+        assert status == 0 and 0 < p["smooth"] < T
+        fitted += 1
+        t = 1.0 + np.linspace(-0.1, T + 0.1, 4001)
+        x, v, a = _shape.evaluate(p, t)
+        dt = t[1] - t[0]
+        assert x[0] == 0.3 and x[-1] == 0.3 + D and v[0] == v[-1] == 0 and a[0] == a[-1] == 0
+        # the derivatives are those of the position
+        assert np.allclose(np.gradient(x, dt)[1:-1], v[1:-1], atol=2 * abs(a).max() * dt + 1e-12)
+        command_speed = v + lag * a
+        command_accel = np.gradient(command_speed, dt)
+        assert np.all(np.abs(command_speed) <= vmax * (1 + REL))
+        # a corner of the acceleration is a jerk step: np.gradient averages over it
+        assert np.all(np.abs(command_accel) <= amax * (1 + 1e-6)), abs(command_accel).max() / amax
+    assert fitted > 150
+
+
+@pytest.mark.parametrize("lead", ["dead_time_lag", "mean_delay", "none"])
+def test_shaped_random_shows_leave_the_limiter_idle(lead):
+    """Many random dances (faster than the servos), shaped for the lead they
+    are played with: the engine limits no axis on any tick."""
+    config = load_config()
+    for seed in range(SEED, SEED + (12 if lead == "dead_time_lag" else 4)):
+        taught = climax.random_dance(config, 8.0, seed)
+        shaped, report = shape_show(taught, config, lead=lead,
+                                    rest_tolerance=0.0 if seed % 2 else None)
+        assert report.limited == [], (seed, [a.describe() for a in report.limited])
+        with Engine(config, shaped, lead=lead, record=True) as engine:
+            engine.step(shaped.n_ticks)
+            records = engine.records()
+        assert engine.stats()["limited"] == 0 and not np.any(records["excess"]), seed
+        # and the unshaped dance does make the limiter act: the check can fail
+        with Engine(config, taught, lead=lead, record=True) as engine:
+            engine.step(taught.n_ticks)
+            assert engine.stats()["limited"] > 0
+
+
+def test_climaxes_land_within_a_tick_on_the_simulated_servos():
+    """bench climax on several seeds: the servo's motion around every climax
+    within one tick of the show's, with compensation; far off without."""
+    for seed in (1, 2, 3):
+        r = climax.climax_timing(seed=seed, seconds=10.0)
+        assert r["climaxes"] > 40 and r["climax_unmatched_compensated"] < r["climaxes"] / 10
+        assert r["limited_axis_ticks_compensated"] == 0
+        assert r["climax_error_ticks_max_compensated"] <= climax.TARGET_TICKS, (seed, r)
+        assert r["climax_error_ticks_median_uncompensated"] > 2.0
+
+
+def test_infeasible_moves_are_reported_with_axis_time_and_trade():
+    """A climax too far for its window: reduced (amplitude) or borrowed (time)."""
+    config = load_config()
+    taught = climax.random_dance(config, 8.0, SEED)
+    _, reduced = shape_show(taught, config, policy="reduce")
+    _, borrowed = shape_show(taught, config, policy="borrow")
+    assert reduced.infeasible and borrowed.infeasible
+    seg = reduced.infeasible[0]
+    assert seg.action == "reduced" and seg.reduced_by > 0 and seg.axis in config.axis_names
+    assert f"axis {seg.axis!r} at {seg.time_s:.3f} s" in str(reduced)
+    assert any(s.action.startswith("borrowed") and s.borrowed_ticks > 0 for s in borrowed.infeasible)
+    assert "the engine's limits act on 0 axis-ticks" in str(reduced)
+
+
+def test_first_move_waits_for_the_command_sampled_ahead():
+    config = load_config()
+    x = config.axes[10]                 # 'x': dead time 0.08 s = 4 ticks ahead
+    assert command_model(x, "dead_time_lag", 0.02) == (x.time_constant, x.dead_time, 6)
+    assert command_model(x, "none", 0.02) == (0.0, 0.0, 0)
+
+
+# ---------------------------------------------------------------- the summary
+
+def test_summary_names_axis_time_and_excess():
+    """Records with known excesses: the lines name each axis, its runs in
+    show time and its largest excess; a warning above WARN_AXIS_TICKS."""
+    config = load_config()
+    n, T = 200, config.tick_period
+    engine = Engine(config, load_show(DEMO_SHOW, config), record=True)
+    rec = np.zeros(n, dtype=engine._core.record_dtype)
+    engine.close()
+    rec["position"] = np.arange(n)
+    rec["excess"][50:60, 10] = np.linspace(0.001, 0.01, 10)        # x: 1.00-1.18 s
+    rec["excess"][150:152, 10] = -0.02                              # x again: 3.00-3.02 s
+    rec["excess"][100, 3] = 0.005                                  # winch_hand_l: 2.00 s
+    found = limited_axes(rec, config.axis_names, [a.unit for a in config.axes], T)
+    assert [a.axis for a in found] == ["x", "winch_hand_l"]
+    x = found[0]
+    assert (x.ticks, x.runs, x.max_excess) == (12, 2, 0.02)
+    assert x.spans[0] == pytest.approx((1.0, 1.18)) and x.max_excess_s == pytest.approx(3.0)
+    lines, warning = summary(rec, config, T)
+    text = "\n".join(lines)
+    assert "limits acted on 13 axis-ticks, on 2 axes" in text
+    assert "x: 12 ticks in 2 run(s) (1.00-1.18 s, 3.00-3.02 s); largest excess 0.02 m at 3.00 s" in text
+    assert "winch_hand_l: 1 ticks in 1 run(s) (2.00 s)" in text
+    assert warning is not None and "13 axis-ticks" in warning and "x" in warning
+    rec["excess"][:] = 0
+    rec["excess"][7, 0] = 0.001
+    assert WARN_AXIS_TICKS >= 1 and summary(rec, config, T)[1] is None
+
+
+def test_play_names_the_limited_axes_and_warns(tmp_path):
+    """The bundled demo played as it is: the limits act (play says where, and
+    warns); shaped: they do not (no warning)."""
+    run = run_cli("play")
+    assert run.returncode == 0, run.stderr
+    assert "largest excess" in run.stdout and "warning: the limits cut the commands" in run.stderr
+    shaped = tmp_path / "shaped.npz"
+    assert run_cli("shape", DEMO_SHOW, "-o", shaped).returncode == 0
+    run = run_cli("play", shaped)
+    assert run.returncode == 0, run.stderr
+    assert "limits acted on 0 axis-ticks" in run.stdout and "warning" not in run.stderr
