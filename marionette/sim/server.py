@@ -53,7 +53,7 @@ class SerialFrontEnd:
             data = os.read(self.fd, 65536)
         except BlockingIOError:
             return []
-        return self.deframer.feed(faults.mangle(data))
+        return self.deframer.feed(faults.mangle(data), refusals=True)
 
     def send(self, messages: list) -> None:
         if messages:
@@ -61,7 +61,9 @@ class SerialFrontEnd:
 
     @property
     def rejected(self) -> int:
-        return self.deframer.rejected
+        """Frames refused before their header could be believed (content
+        refusals come as protocol.Refused, for the node they address)."""
+        return self.deframer.rejected - self.deframer.counters["decode_errors"]
 
     def counters(self) -> dict:
         return self.deframer.counters
@@ -98,12 +100,10 @@ class SlcanFrontEnd:
             if faults.rng.random() < faults.drop_rate + faults.corrupt_rate * 8 * (len(payload) + 6):
                 self.frames_dropped += 1
                 continue
-            messages += self.decoder.feed(can_id, payload)
+            messages += self.decoder.feed(can_id, payload, refusals=True)
         return messages
 
-    @property
-    def rejected(self) -> int:
-        return self.decoder.rejected
+    rejected = 0        # the CAN controller drops a bad frame; every refusal names its node
 
     def send(self, messages: list) -> None:
         lines = b"".join(SlcanAdapter.encode(can_id, data)
