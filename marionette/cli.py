@@ -30,7 +30,7 @@ from marionette.show import LIMIT_POLICIES, load_show
 BENCHES = ("tick", "jitter", "moves", "fuzz", "link", "sync")
 # commands that live in their own modules (marionette/cmd_<name>.py, each with
 # register(subparsers) setting run=...)
-COMMAND_MODULES = ("calibrate", "teach", "plot", "sim", "sync_sim", "log", "demo")
+COMMAND_MODULES = ("calibrate", "teach", "plot", "sim", "sync_sim", "log", "demo", "conformance")
 
 
 def _figure_and_show(args):

@@ -31,7 +31,6 @@ from marionette.sim.faults import Faults
 from marionette.sim.figure import SimFigure
 from marionette.sim.slcan import Pty, SlcanAdapter
 
-POLL = 0.001                # longest wait in the loop [s]
 IDLE_ADVANCE = 0.02         # the drives run on (watchdogs, quick stops) at least this often [s]
 
 
@@ -208,7 +207,14 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
         # a terminal is read only while it has us in its foreground (a read
         # from the background would stop the process: SIGTTIN)
         listen = control is not None and (not tty or _in_foreground(control))
-        readable, _, _ = select.select([front.fd] + ([control] if listen else []), [], [], POLL)
+        # sleep until input, a delayed message is due, or the drives' next run:
+        # a loop that woke every millisecond kept a core a quarter busy, and
+        # on a loaded machine made the answers late
+        wait = pending[0][0] - now() if pending else figure.time + IDLE_ADVANCE - now()
+        if tty and not listen:
+            wait = min(wait, IDLE_ADVANCE)          # to notice the foreground again
+        readable, _, _ = select.select([front.fd] + ([control] if listen else []), [], [],
+                                       min(max(wait, 0.0), IDLE_ADVANCE))
         if control is not None and control in readable:
             line = control.readline()
             if not line:                    # stdin closed: run on
