@@ -23,6 +23,8 @@ LIMIT_SPAN = 2000           # limits configured around each channel's start posi
 STEP = 300                  # the move of channel 0 [counts]
 FIRST_ANSWER_TICKS = 2      # the first STATUS must come within this many ticks of the first SYNC
 START_TICKS = 50            # how long the tester waits for the first STATUS [ticks]
+WAY = 0.005                 # a frame's way to the node, at most [s]
+WATCHDOG_SLACK = 2          # the node may notice its watchdog this much late [ticks]
 LATE_TICKS = 10             # how long a tick waits for its STATUS, once the node has answered [ticks]
 WRAP_FROM = 2**32 - 3       # the tick the seq wrap check restarts at
 SERIAL_BAUD = 1_000_000     # default [baud]
@@ -155,6 +157,7 @@ class Tester:
         self.start: list[int] = []      # positions at the start [counts]
         self.channels = 0               # the node's channels (its STATUS's positions)
         self.answered = False           # the node has answered a SYNC: later ticks wait for theirs
+        self.sent_at: dict[int, float] = {}     # tick (mod 256 on CAN) -> when its SYNC went [s]
         self.figures: dict = {}
 
     # the wire ----------------------------------------------------------------
@@ -186,6 +189,7 @@ class Tester:
         this tick, when polled)."""
         t0 = time.monotonic()
         k = self.tick
+        self.sent_at[self.wrap(k)] = t0
         self.link.send(P.Sync(k, poll) if not self.can else P.Sync(k))
         if setpoints and self.targets is not None:
             self.link.send(P.Setpoints(k, [(self.node, c, v) for c, v in enumerate(self.targets)]))
@@ -202,8 +206,12 @@ class Tester:
         self.seq += 1
         return self.seq
 
+    def wrap(self, tick: int) -> int:
+        """A tick as the link carries it in STATUS (CAN: its low byte)."""
+        return tick % (256 if self.can else 2**32)
+
     def same_tick(self, status_tick: int, k: int) -> bool:
-        return (status_tick - k) % (256 if self.can else 2**32) == 0
+        return self.wrap(status_tick - k) == 0
 
     # helpers on answers ---------------------------------------------------------
     @staticmethod
@@ -413,15 +421,20 @@ def _following(t: Tester) -> None:
 
 
 def _watchdog(t: Tester) -> None:
-    last = t.tick - 1                   # the tick of the last setpoint
+    last = t.sent_at[t.wrap(t.tick - 1)]        # when the last setpoint went [s]
     t.targets, saved = None, t.targets
     per_tick = t.ticks(WATCHDOG_TICKS + 4, setpoints=False)
-    flagged = [i + 1 for i, a in enumerate(per_tick) for s in t.statuses(a) if s.flags & P.FLAG_WATCHDOG]
-    # the SYNC WATCHDOG_TICKS after the last setpoint comes just before the
-    # watchdog time is up; the next one after
-    t.check("6 Watchdog", f"WATCHDOG set {WATCHDOG_TICKS} ticks after the last setpoint, not before",
-            bool(flagged) and WATCHDOG_TICKS <= flagged[0] <= WATCHDOG_TICKS + 2,
-            f"first WATCHDOG flag {flagged[0] if flagged else None} ticks after tick {last}")
+    # judged by time, as the node does: STATUS answers the SYNC sent dt after
+    # the last setpoint; WATCHDOG may be set once dt reaches the watchdog
+    # time (less the way there), and must be WATCHDOG_SLACK ticks later
+    limit = WATCHDOG_TICKS * TICK
+    seen = [(t.sent_at[t.wrap(s.tick)] - last, bool(s.flags & P.FLAG_WATCHDOG))
+            for a in per_tick for s in t.statuses(a) if t.wrap(s.tick) in t.sent_at]
+    early = [round(dt * 1e3) for dt, flag in seen if flag and dt < limit - WAY]
+    late = [round(dt * 1e3) for dt, flag in seen if not flag and dt > limit + WATCHDOG_SLACK * TICK]
+    t.check("6 Watchdog", f"WATCHDOG set {WATCHDOG_TICKS} ticks ({limit * 1e3:.0f} ms) after the last "
+            "setpoint, not before", any(flag for _, flag in seen) and not early and not late,
+            f"set at {early} ms, or not yet at {late} ms, after the last setpoint")
     s = t.last_status(per_tick)
     t.check("6 Watchdog", "PRE_OPERATIONAL once the watchdog tripped",
             s is not None and s.state == P.STATE_PRE_OPERATIONAL, f"state {s.state if s else None}")
