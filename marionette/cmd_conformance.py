@@ -2,6 +2,7 @@
 firmware_protocol/SPEC.md over a serial line or a CAN bus."""
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 
@@ -33,7 +34,11 @@ def cmd_conformance(args) -> int:
         return 2
     try:
         report = run_checks(link, args.node)
+    except OSError as exc:              # the port went away (serial.SerialException, CAN devices)
+        print(f"marionette conformance: the link failed: {exc}", file=sys.stderr)
+        return 2
     finally:
-        link.close()
+        with contextlib.suppress(OSError):
+            link.close()
     print(json.dumps(report) if args.json else format_report(report), flush=True)
     return 1 if report["failed"] else 0

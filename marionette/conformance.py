@@ -106,7 +106,11 @@ class CanLink:
         self.decoder = P.CanDecoder()       # fed our own SYNCs too: it unwraps STATUS ticks
 
     def close(self) -> None:
-        self.bus.shutdown()
+        import can
+        try:
+            self.bus.shutdown()
+        except can.CanError as exc:
+            raise OSError(f"CAN {self.interface}:{self.channel}: {exc}") from None
 
     def send(self, message) -> None:
         for can_id, data in P.encode_can(message):
@@ -116,10 +120,17 @@ class CanLink:
         import can
         if can_id == P.CAN_SYNC:
             self.decoder.feed(can_id, data)
-        self.bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+        try:
+            self.bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
+        except can.CanError as exc:
+            raise OSError(f"CAN {self.interface}:{self.channel}: {exc}") from None
 
     def receive(self, timeout: float) -> list:
-        msg = self.bus.recv(max(timeout, 0.0))
+        import can
+        try:
+            msg = self.bus.recv(max(timeout, 0.0))
+        except can.CanError as exc:
+            raise OSError(f"CAN {self.interface}:{self.channel}: {exc}") from None
         if msg is None or msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
             return []
         return self.decoder.feed(msg.arbitration_id, bytes(msg.data))
@@ -243,7 +254,9 @@ def run_checks(link, node: int) -> dict:
         except _Abort as exc:           # the node did not answer: later phases cannot run
             t.check(exc.section, exc.name, False, str(exc))
             break
-    t.targets = None
+        except (AttributeError, TypeError, IndexError, KeyError) as exc:    # an answer missing
+            t.check("tester", f"the checks of {phase.__name__.strip('_')} ran to the end", False,
+                    f"an answer the checks needed did not come ({type(exc).__name__}: {exc})")
     sections: dict[str, list] = {}
     for c in t.checks:
         sections.setdefault(c.section, []).append(asdict(c))

@@ -207,12 +207,9 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
         # a terminal is read only while it has us in its foreground (a read
         # from the background would stop the process: SIGTTIN)
         listen = control is not None and (not tty or _in_foreground(control))
-        # sleep until input, a delayed message is due, or the drives' next run:
-        # a loop that woke every millisecond kept a core a quarter busy, and
-        # on a loaded machine made the answers late
+        # sleep until input, a delayed message is due, or the drives' next
+        # run (at most IDLE_ADVANCE: a terminal's foreground is checked again)
         wait = pending[0][0] - now() if pending else figure.time + IDLE_ADVANCE - now()
-        if tty and not listen:
-            wait = min(wait, IDLE_ADVANCE)          # to notice the foreground again
         readable, _, _ = select.select([front.fd] + ([control] if listen else []), [], [],
                                        min(max(wait, 0.0), IDLE_ADVANCE))
         if control is not None and control in readable:
