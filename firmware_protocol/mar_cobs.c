@@ -22,6 +22,8 @@ size_t mar_cobs_encode(const uint8_t *in, size_t n, uint8_t *out)
 long mar_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap)
 {
     size_t i = 0, o = 0;
+    if (n == 0)                 /* the encoding of nothing is 01 */
+        return -1;
     while (i < n) {
         uint8_t code = in[i++];
         if (code == 0)
@@ -36,6 +38,10 @@ long mar_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap)
                 return -1;
             out[o++] = in[i++];
         }
+        /* one encoding per block: a run of 254 bytes (0xFF) is always followed
+         * by another block, 01 at the end (the "optimised" COBS leaves it out) */
+        if (code == 0xFF && i == n)
+            return -1;
         /* a block shorter than 254 bytes stands for a 0x00, except the last */
         if (code != 0xFF && i < n) {
             if (o == cap)

@@ -18,8 +18,10 @@ size_t mar_cobs_encode(const uint8_t *in, size_t n, uint8_t *out);
 
 /* Decodes n encoded bytes (no delimiter) into out, which may be in itself
  * (decoding in place is safe: the output never overtakes the input).
- * Returns the decoded length [bytes], or -1 when the input holds a 0x00 or
- * a code byte points past its end, or -2 when cap is too small. */
+ * Returns the decoded length [bytes], or -1 when the input is not the one
+ * encoding mar_cobs_encode makes of anything: it is empty, holds a 0x00, a
+ * code byte points past its end, or it ends with a block of 254 bytes
+ * (code 0xFF) without the final 01; or -2 when cap is too small. */
 long mar_cobs_decode(const uint8_t *in, size_t n, uint8_t *out, size_t cap);
 
 #endif

@@ -176,7 +176,7 @@ def cobs_decode(const uint8_t[::1] data):
     cdef size_t n = data.shape[0]
     out = bytearray(n)
     cdef uint8_t *o = out
-    cdef long k = mar_cobs_decode(&data[0], n, o, n) if n else 0
+    cdef long k = mar_cobs_decode(&data[0], n, o, n) if n else -1
     if k < 0:
         raise ArgumentError("invalid COBS encoding")
     return bytes(out[:k])

@@ -31,8 +31,8 @@ Serial (COBS frames, each ended by 0x00)::
 CAN (11-bit identifiers, CANopen-like; firmware_protocol/marionette.dbc)::
 
     encode_can(message) -> [(can_id, data), ...]
-    CanDecoder().feed(can_id, data) -> [message] or []   joins STATUS and CONFIG frames, unwraps
-        the SYNC counter (.tick); .counters; .rejected
+    CanDecoder().feed(can_id, data, refusals=False) -> [message] or []   joins STATUS and CONFIG
+        frames, unwraps the SYNC counter (.tick); .counters; .rejected
     decode_can_frames([(can_id, data), ...]) -> [message, ...]      with a fresh CanDecoder
     can_records(buf) -> [(can_id, data), ...]   the engine's CAN ring records (ext/mar_sink.h)
     can_record(can_id, data) -> bytes           one such record
@@ -81,6 +81,7 @@ STATUS = _p.MSG_STATUS
 HEARTBEAT = _p.MSG_HEARTBEAT
 LOUDNESS = _p.MSG_LOUDNESS
 NACK = _p.MSG_NACK
+FROM_NODE = 0x80             # type bit 7: sent by a node
 TYPE_NAMES = {SYNC: "SYNC", SETPOINT: "SETPOINT", ESTOP: "ESTOP", ESTOP_RELEASE: "ESTOP_RELEASE",
               CONFIG: "CONFIG", STATUS: "STATUS", HEARTBEAT: "HEARTBEAT", LOUDNESS: "LOUDNESS",
               NACK: "NACK"}
@@ -436,8 +437,10 @@ class CanDecoder:
         self.messages = 0           # messages given
         self.errors: dict[int, int] = {}    # status code -> frames refused
 
-    def feed(self, can_id: int, data: bytes) -> list:
-        """[message] when the frame completed one, else []."""
+    def feed(self, can_id: int, data: bytes, refusals: bool = False) -> list:
+        """[message] when the frame completed one, else []; with refusals,
+        [Refused] for a frame of this protocol's identifiers that was
+        refused (what a node answers with a NACK; seq is APPLY's value)."""
         self.frames += 1
         status, raw = self._rx.feed(int(can_id), bytes(data))
         if status == 1:
@@ -445,6 +448,8 @@ class CanDecoder:
             return [_message(raw)]
         if status < 0:
             self.errors[status] = self.errors.get(status, 0) + 1
+            if refusals and status != E_ID:
+                return [_can_refused(status, int(can_id), bytes(data))]
         return []
 
     @property
@@ -460,6 +465,26 @@ class CanDecoder:
     def counters(self) -> dict:
         return {"frames": self.frames, "messages": self.messages, "rejected": self.rejected,
                 "stale": self.errors.get(E_STALE, 0)}
+
+
+# function code (identifier & 0x780) -> the message type its frames carry
+_CAN_TYPES = {CAN_EMCY: NACK, CAN_STATUS: STATUS, CAN_POSITION: STATUS, CAN_POSITION + 0x100: STATUS,
+              CAN_POSITION + 0x200: STATUS, CAN_SETPOINT: SETPOINT, CAN_SETPOINT + 0x100: SETPOINT,
+              CAN_SETPOINT + 0x200: SETPOINT, CAN_CONFIG: CONFIG, CAN_LOUDNESS: LOUDNESS,
+              CAN_HEARTBEAT: HEARTBEAT}
+
+
+def _can_refused(status: int, can_id: int, data: bytes) -> Refused:
+    """Type, addressee and seq of a refused CAN frame, as a serial header would give them."""
+    reason = _p.reason_of(status)
+    if can_id in (CAN_ESTOP, CAN_ESTOP_RELEASE):
+        node = data[0] if len(data) == 1 else BROADCAST
+        return Refused(reason, ESTOP if can_id == CAN_ESTOP else ESTOP_RELEASE, node, 0)
+    if can_id == CAN_SYNC:
+        return Refused(reason, SYNC, BROADCAST, 0)
+    kind = _CAN_TYPES.get(can_id & 0x780, 0)
+    seq = int.from_bytes(data[4:8], "little") if kind == CONFIG and data[:1] == b"\x7f" else 0
+    return Refused(reason, kind, can_id & 0x7F, seq)
 
 
 def decode_can_frames(frames) -> list:

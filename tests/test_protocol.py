@@ -12,6 +12,7 @@ import cantools
 import numpy as np
 import pytest
 
+from marionette import _protocol as _p
 from marionette import protocol as P
 from marionette.config import load_config
 
@@ -75,6 +76,24 @@ def test_serial_golden_vector(vector):
     assert P.crc32c(body[:-4]) == int.from_bytes(body[-4:], "little")
     assert body[0] == P.VERSION and body[1] == getattr(P, vector["message"]["type"])
     assert b"\0" not in wire[:-1] and len(wire) <= P.WIRE_MAX
+
+
+def test_refused_vectors():
+    vectors = json.loads((VECTORS / "refused.json").read_text())
+    assert {v["link"] for v in vectors} == {"serial", "can"}
+    for v in vectors:
+        code = getattr(P, v["error"])
+        if v["link"] == "serial":
+            with pytest.raises(P.ProtocolError) as err:
+                P.decode_serial(bytes.fromhex(v["wire"]))
+            assert err.value.code == code, v["name"]
+            continue
+        rx = _p.CanReceiver()
+        for can_id, data in v["prefix"]:
+            assert rx.feed(can_id, bytes.fromhex(data))[0] >= 0, v["name"]
+        (can_id, data), = v["frame"]
+        assert rx.feed(can_id, bytes.fromhex(data))[0] == code, v["name"]
+        assert _p.reason_of(code) == v["reason"], v["name"]
 
 
 def test_serial_vectors_as_one_stream():
@@ -394,7 +413,7 @@ def expected_signals(message, frames):
         out = [(P.CAN_STATUS + m.node, {
             "counter": m.tick & 0xFF, "flag_limit": m.flags & 1, "flag_fault": m.flags >> 1 & 1,
             "flag_watchdog": m.flags >> 2 & 1, "flag_following": m.flags >> 3 & 1,
-            "flag_estop": m.flags >> 4 & 1, "state": m.state, "channels": n, "rejected": m.rejected,
+            "flag_estop": m.flags >> 4 & 1, "reserved": 0, "state": m.state, "channels": n, "rejected": m.rejected,
             "seq_gaps": m.seq_gaps})]
         for pdo in range((n + 2) // 3):
             out.append((P.CAN_POSITION + 0x100 * pdo + m.node, {"counter": m.tick & 0xF, **{
@@ -403,14 +422,14 @@ def expected_signals(message, frames):
         return out
     assert isinstance(m, P.Config)
     cid = P.CAN_CONFIG + m.node
-    out = [(cid, {"param": 1, "channel": 255, "tick_period_us": m.tick_period_us}),
-           (cid, {"param": 2, "channel": 255, "watchdog_ticks": m.watchdog_ticks})]
+    out = [(cid, {"param": 1, "reserved": 0, "begin_channel": 255, "tick_period_us": m.tick_period_us}),
+           (cid, {"param": 2, "reserved": 0, "watchdog_channel": 255, "watchdog_ticks": m.watchdog_ticks})]
     for c in m.channels:
-        out += [(cid, {"param": 16, "channel": c.channel, "min_counts": c.min_counts}),
-                (cid, {"param": 17, "channel": c.channel, "max_counts": c.max_counts}),
-                (cid, {"param": 18, "channel": c.channel, "max_speed": c.max_speed}),
-                (cid, {"param": 19, "channel": c.channel, "max_accel": c.max_accel})]
-    return out + [(cid, {"param": 127, "channel": len(m.channels), "seq": m.seq})]
+        out += [(cid, {"param": 16, "reserved": 0, "min_channel": c.channel, "min_counts": c.min_counts}),
+                (cid, {"param": 17, "reserved": 0, "max_channel": c.channel, "max_counts": c.max_counts}),
+                (cid, {"param": 18, "reserved": 0, "speed_channel": c.channel, "max_speed": c.max_speed}),
+                (cid, {"param": 19, "reserved": 0, "accel_channel": c.channel, "max_accel": c.max_accel})]
+    return out + [(cid, {"param": 127, "reserved": 0, "channels": len(m.channels), "seq": m.seq})]
 
 
 def test_dbc_and_codec_agree():
@@ -434,6 +453,25 @@ def test_dbc_and_codec_agree():
     assert seen == {"SYNC", "ESTOP", "ESTOP_RELEASE", "SETPOINT_A", "SETPOINT_B", "SETPOINT_C",
                     "STATUS", "POSITION_A", "POSITION_B", "POSITION_C", "CONFIG", "LOUDNESS",
                     "HEARTBEAT", "NACK"}
+
+
+def test_dbc_bounds_ranges_and_comments_every_message():
+    db = cantools.database.load_file(str(DBC))
+    assert all(m.comment for m in db.messages)
+    n = DBC_NODES
+    bounds = {(f"SETPOINT_C_N{n}", "ch8"): (-P.CAN_COUNTS_MAX, P.CAN_COUNTS_MAX),
+              (f"POSITION_A_N{n}", "ch0"): (-P.CAN_COUNTS_MAX, P.CAN_COUNTS_MAX),
+              (f"STATUS_N{n}", "channels"): (0, P.CAN_CHANNELS), (f"CONFIG_N{n}", "channels"): (0, P.CAN_CHANNELS),
+              (f"CONFIG_N{n}", "begin_channel"): (255, 255), (f"CONFIG_N{n}", "watchdog_ticks"): (1, 65535),
+              (f"CONFIG_N{n}", "min_channel"): (0, P.CAN_CHANNELS - 1)}
+    for (message, name), (lo, hi) in bounds.items():
+        sig = db.get_message_by_name(message).get_signal_by_name(name)
+        assert (sig.minimum, sig.maximum) == (lo, hi), (message, name)
+    for message, start in ((f"STATUS_N{n}", 13), (f"CONFIG_N{n}", 16)):     # [0|0] reads as no range
+        sig = db.get_message_by_name(message).get_signal_by_name("reserved")
+        assert sig.start == start and "Reserved" in sig.comment, message
+    status = db.get_message_by_name(f"STATUS_N{n}")
+    assert db.decode_message(status.frame_id, bytes.fromhex("0520050000000000"))["reserved"] == 1
 
 
 def test_spec_quotes_the_bus_budget():

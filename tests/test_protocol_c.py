@@ -46,5 +46,5 @@ def test_committed_vectors_are_what_the_program_writes(tmp_path):
     out.mkdir()
     run = subprocess.run([str(exe), str(out)], capture_output=True, text=True, timeout=60)
     assert run.returncode == 0, run.stderr
-    for name in ("serial.json", "can.json"):
+    for name in ("serial.json", "can.json", "refused.json"):
         assert (out / name).read_text() == (PROTO / "vectors" / name).read_text(), name

@@ -81,6 +81,16 @@ static void test_cobs(void)
     CHECK(mar_cobs_decode(z, 2, d, 4) == -1, "0x00 inside an encoding accepted");
     uint8_t past[2] = { 5, 1 };
     CHECK(mar_cobs_decode(past, 2, d, 4) == -1, "code byte past the end accepted");
+    CHECK(mar_cobs_decode(z, 0, d, 4) == -1, "empty encoding accepted");
+    uint8_t run[256], data[254];
+    run[0] = 0xFF;
+    for (int i = 0; i < 254; i++)
+        run[1 + i] = data[i] = (uint8_t)(1 + i);
+    run[255] = 1;
+    uint8_t back[254];
+    CHECK(mar_cobs_decode(run, 256, back, 254) == 254 && memcmp(back, data, 254) == 0,
+          "254-byte run with its final 01 refused");
+    CHECK(mar_cobs_decode(run, 255, back, 254) == -1, "254-byte run without its final 01 accepted");
 }
 
 static size_t wire_size(const mar_msg *m)

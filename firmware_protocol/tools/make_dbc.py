@@ -16,7 +16,9 @@ import sys
 
 HOST = "HOST"
 ANY = "Vector__XXX"
-INT20 = (-524288, 524287)
+INT20 = (-524287, 524287)   # counts; -524288 is NONE, outside the range
+NONE = -524288
+U32 = 4294967295
 STATES = {0: "BOOT", 4: "STOPPED", 5: "OPERATIONAL", 127: "PRE_OPERATIONAL"}
 PARAMS = {1: "BEGIN", 2: "WATCHDOG", 16: "MIN", 17: "MAX", 18: "SPEED", 19: "ACCEL", 127: "APPLY"}
 REASONS = {0: "ACCEPTED", 1: "BAD_VERSION", 2: "BAD_TYPE", 3: "BAD_LENGTH", 4: "BAD_VALUE",
@@ -25,8 +27,9 @@ REASONS = {0: "ACCEPTED", 1: "BAD_VERSION", 2: "BAD_TYPE", 3: "BAD_LENGTH", 4: "
 
 
 def signal(name, start, length, signed=False, unit="", mux="", lo=None, hi=None):
-    if lo is None:
-        lo, hi = (-(1 << (length - 1)), (1 << (length - 1)) - 1) if signed else (0, (1 << length) - 1)
+    full = (-(1 << (length - 1)), (1 << (length - 1)) - 1) if signed else (0, (1 << length) - 1)
+    lo = full[0] if lo is None else lo
+    hi = full[1] if hi is None else hi
     mux = f" {mux}" if mux else ""
     return (f' SG_ {name}{mux} : {start}|{length}@1{"-" if signed else "+"} (1,0) [{lo}|{hi}] '
             f'"{unit}" {ANY}')
@@ -49,22 +52,23 @@ def build(n_nodes: int) -> str:
     lines = ['VERSION "marionette servo protocol 1"', "", "NS_ :", "    CM_", "    VAL_",
              "    SIG_VALTYPE_", "", "BS_:", "", "BU_: " + " ".join([HOST] + nodes), ""]
     comments, values, floats = [], [], []
-    lines += message(0x001, "ESTOP", 1, HOST, [signal("node", 0, 8)])
+    lines += message(0x001, "ESTOP", 1, HOST, [signal("node", 0, 8, lo=1, hi=255)])
     comments.append(f'CM_ BO_ {0x001} "Latch the e-stop of one node, or of every node (255)";')
-    lines += message(0x002, "ESTOP_RELEASE", 1, HOST, [signal("node", 0, 8)])
+    lines += message(0x002, "ESTOP_RELEASE", 1, HOST, [signal("node", 0, 8, lo=1, hi=255)])
     comments.append(f'CM_ BO_ {0x002} "Release the e-stop latch of one node, or of every node (255)";')
     lines += message(0x080, "SYNC", 1, HOST, [signal("counter", 0, 8)])
     comments.append(f'CM_ BO_ {0x080} "A tick begins: tick mod 256";')
     for n in range(1, n_nodes + 1):
         me = f"NODE{n}"
         lines += message(0x080 + n, f"NACK_N{n}", 8, me, [
-            signal("reason", 0, 16), signal("flags", 16, 8), signal("ref_type", 24, 8),
+            signal("reason", 0, 16), signal("flags", 16, 8, hi=31), signal("ref_type", 24, 8),
             signal("ref_seq", 32, 32)])
         values.append((0x080 + n, "reason", REASONS))
         lines += message(0x180 + n, f"STATUS_N{n}", 8, me, [
             signal("counter", 0, 8), signal("flag_limit", 8, 1), signal("flag_fault", 9, 1),
             signal("flag_watchdog", 10, 1), signal("flag_following", 11, 1), signal("flag_estop", 12, 1),
-            signal("state", 16, 8), signal("channels", 24, 8), signal("rejected", 32, 16),
+            signal("reserved", 13, 3, hi=0), signal("state", 16, 8, hi=127),
+            signal("channels", 24, 8, hi=9), signal("rejected", 32, 16),
             signal("seq_gaps", 48, 16)])
         values.append((0x180 + n, "state", STATES))
         for k, letter in enumerate("ABC"):
@@ -73,32 +77,42 @@ def build(n_nodes: int) -> str:
             lines += message(pos, f"POSITION_{letter}_N{n}", 8, me, pdo(3 * k))
             for can_id in (sp, pos):
                 for c in range(3 * k, 3 * k + 3):
-                    values.append((can_id, f"ch{c}", {INT20[0]: "NONE"}))
+                    values.append((can_id, f"ch{c}", {NONE: "NONE"}))
         lines += message(0x600 + n, f"CONFIG_N{n}", 8, HOST, [
-            signal("param", 0, 8, mux="M"), signal("channel", 8, 8),
-            signal("tick_period_us", 32, 32, unit="us", mux="m1"),
-            signal("watchdog_ticks", 32, 32, unit="ticks", mux="m2"),
+            signal("param", 0, 8, mux="M"), signal("reserved", 16, 16, hi=0),
+            signal("begin_channel", 8, 8, mux="m1", lo=255, hi=255),
+            signal("tick_period_us", 32, 32, unit="us", mux="m1", lo=1, hi=U32),
+            signal("watchdog_channel", 8, 8, mux="m2", lo=255, hi=255),
+            signal("watchdog_ticks", 32, 32, unit="ticks", mux="m2", lo=1, hi=65535),
+            signal("min_channel", 8, 8, mux="m16", hi=8),
             signal("min_counts", 32, 32, True, "counts", mux="m16"),
+            signal("max_channel", 8, 8, mux="m17", hi=8),
             signal("max_counts", 32, 32, True, "counts", mux="m17"),
-            signal("max_speed", 32, 32, unit="counts/s", mux="m18"),
-            signal("max_accel", 32, 32, unit="counts/s^2", mux="m19"),
+            signal("speed_channel", 8, 8, mux="m18", hi=8),
+            signal("max_speed", 32, 32, unit="counts/s", mux="m18", lo=1, hi=U32),
+            signal("accel_channel", 8, 8, mux="m19", hi=8),
+            signal("max_accel", 32, 32, unit="counts/s^2", mux="m19", lo=1, hi=U32),
+            signal("channels", 8, 8, mux="m127", hi=9),
             signal("seq", 32, 32, mux="m127")])
         values.append((0x600 + n, "param", PARAMS))
         lines += message(0x680 + n, f"LOUDNESS_N{n}", 8, me, [
             signal("frame", 0, 32), signal("loudness", 32, 32, True, lo=0, hi="3.4028234663852886e+38")])
         floats.append((0x680 + n, "loudness"))
-        lines += message(0x700 + n, f"HEARTBEAT_N{n}", 1, me, [signal("state", 0, 8)])
+        lines += message(0x700 + n, f"HEARTBEAT_N{n}", 1, me, [signal("state", 0, 8, hi=127)])
         values.append((0x700 + n, "state", STATES))
-        if n == 1:
-            comments += [
-                f'CM_ BO_ {0x081} "NACK of node n (CANopen EMCY place): reason 0 acknowledges a CONFIG";',
-                f'CM_ BO_ {0x181} "STATUS header of node n, answering SYNC counter; positions follow";',
-                f'CM_ BO_ {0x201} "Setpoints of node n, channels 0..2 (B: 3..5, C: 6..8); counter = tick mod 16";',
-                f'CM_ BO_ {0x281} "Actual positions of node n, channels 0..2 (B: 3..5, C: 6..8)";',
-                f'CM_ BO_ {0x601} "CONFIG of node n, one parameter per frame; APPLY (127) ends it";',
-                f'CM_ BO_ {0x681} "Loudness of one 20 ms audio frame measured by node n";',
-                f'CM_ BO_ {0x701} "Heartbeat of node n: its state";',
-            ]
+        comments += [
+            f'CM_ BO_ {0x080 + n} "NACK of node {n} (CANopen EMCY place): reason 0 acknowledges a CONFIG";',
+            f'CM_ BO_ {0x180 + n} "STATUS header of node {n}, answering SYNC counter; positions follow";',
+            *(f'CM_ BO_ {0x200 + 0x100 * k + n} "Setpoints of node {n}, channels {3 * k}..{3 * k + 2}; '
+              f'counter = tick mod 16; NONE: no value";' for k in range(3)),
+            *(f'CM_ BO_ {0x280 + 0x100 * k + n} "Actual positions of node {n}, channels '
+              f'{3 * k}..{3 * k + 2}; NONE: no such channel";' for k in range(3)),
+            f'CM_ BO_ {0x600 + n} "CONFIG of node {n}, one parameter per frame from BEGIN (1) to APPLY (127)";',
+            f'CM_ BO_ {0x680 + n} "Loudness of one 20 ms audio frame measured by node {n}";',
+            f'CM_ BO_ {0x700 + n} "Heartbeat of node {n}: its state";',
+            *(f'CM_ SG_ {can_id} reserved "Reserved: sent as 0; a frame where it is not 0 is refused";'
+              for can_id in (0x180 + n, 0x600 + n)),
+        ]
     lines += comments
     lines.append("")
     for can_id, name, table in values:

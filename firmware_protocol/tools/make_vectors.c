@@ -9,8 +9,11 @@
  * vectors list the frames of the message ("frames", after the "prefix"
  * frames a receiver must have seen, e.g. the SYNC before setpoint PDOs) and
  * what a fresh receiver decodes from prefix + frames ("decoded").
+ * vectors/refused.json holds frames a receiver must refuse, with the
+ * codec's status ("error") and the NACK reason a node answers with.
  * tests/test_protocol.py checks the Python API against these files, and
  * that they equal what this program writes now. */
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -77,7 +80,10 @@ static void message(FILE *f, const mar_msg *m)
         fprintf(f, ", \"state\": %u", m->heartbeat.state);
         break;
     case MAR_MSG_LOUDNESS:
-        fprintf(f, ", \"value\": %.9g", (double)m->loudness.value);
+        if (m->loudness.value == 0.0f && signbit(m->loudness.value))
+            fprintf(f, ", \"value\": -0.0");      /* JSON's -0 would read back as 0 */
+        else
+            fprintf(f, ", \"value\": %.9g", (double)m->loudness.value);
         break;
     case MAR_MSG_NACK:
         fprintf(f, ", \"reason\": %u, \"flags\": %u, \"ref_type\": %u, \"ref_seq\": %lu", m->nack.reason,
@@ -139,6 +145,15 @@ static size_t messages(mar_msg *out, const char **names)
     m.setpoint.n = MAR_SETPOINT_MAX;
     names[n] = "setpoints_60_channels", out[n++] = m;
 
+    /* node 2's channels 0, 1, 3: the gap starts a second group of node 2 */
+    m = msg(MAR_MSG_SETPOINT, MAR_BROADCAST, 77);
+    m.setpoint.entry[0] = (mar_setpoint_entry){ 2, 0, 100 };
+    m.setpoint.entry[1] = (mar_setpoint_entry){ 2, 1, -100 };
+    m.setpoint.entry[2] = (mar_setpoint_entry){ 2, 3, 7 };
+    m.setpoint.entry[3] = (mar_setpoint_entry){ 3, 0, 0 };
+    m.setpoint.n = 4;
+    names[n] = "setpoints_channel_gap", out[n++] = m;
+
     names[n] = "estop_every_node", out[n++] = msg(MAR_MSG_ESTOP, MAR_BROADCAST, 1);
     names[n] = "estop_node_3", out[n++] = msg(MAR_MSG_ESTOP, 3, 2);
     names[n] = "estop_release_every_node", out[n++] = msg(MAR_MSG_ESTOP_RELEASE, MAR_BROADCAST, 3);
@@ -181,6 +196,9 @@ static size_t messages(mar_msg *out, const char **names)
     m = msg(MAR_MSG_LOUDNESS, 6, 1001);
     m.loudness.value = 0.0f;
     names[n] = "loudness_silence", out[n++] = m;
+    m = msg(MAR_MSG_LOUDNESS, 6, 1002);
+    m.loudness.value = -0.0f;
+    names[n] = "loudness_minus_zero", out[n++] = m;
 
     m = msg(MAR_MSG_NACK, 5, 0);
     m.nack.reason = MAR_REASON_BAD_CONFIG;
@@ -270,6 +288,75 @@ static int write_can(FILE *f, const mar_msg *ms, const char **names, size_t n)
     return 0;
 }
 
+static const char *error_name(int status)
+{
+    switch (status) {
+    case MAR_E_COBS: return "E_COBS";
+    case MAR_E_VALUE: return "E_VALUE";
+    case MAR_E_INCOMPLETE: return "E_INCOMPLETE";
+    case MAR_E_STALE: return "E_STALE";
+    default: return "?";
+    }
+}
+
+static mar_can_frame can_frame(uint16_t id, uint8_t b0, uint8_t b1, uint8_t b2, uint32_t value)
+{
+    mar_can_frame f = { id, 8, { b0, b1, b2, 0, (uint8_t)value, (uint8_t)(value >> 8),
+                                 (uint8_t)(value >> 16), (uint8_t)(value >> 24) } };
+    return f;
+}
+
+/* Frames the decoders refuse although a careless encoder might send them. */
+static int write_refused(FILE *f, const mar_msg *sixty)
+{
+    uint8_t wire[MAR_WIRE_MAX];
+    mar_msg m;
+    fprintf(f, "[\n");
+    /* the optimised COBS: ff <254 bytes> 00, without the final 01 block */
+    long w = mar_encode_frame(sixty, wire, sizeof wire);
+    if (w < 3 || wire[w - 2] != 1)
+        return 1;
+    wire[w - 2] = 0;
+    int r = mar_decode_frame(wire, (size_t)w - 1, &m);
+    fprintf(f, "  {\"name\": \"cobs_optimised_ending\", \"link\": \"serial\", \"wire\": ");
+    hex(f, wire, (size_t)w - 1);
+    /* not answered: a node cannot trust the header of a frame it could not decode */
+    fprintf(f, ", \"error\": \"%s\", \"reason\": null}", error_name(r));
+
+    static const mar_can_frame sync = { MAR_CAN_SYNC, 1, { 5, 0, 0, 0, 0, 0, 0, 0 } };
+    mar_can_frame begin = can_frame(MAR_CAN_CONFIG + 5, MAR_CAN_PARAM_BEGIN, 0xFF, 0, 20000);
+    mar_can_frame none;
+    int32_t v[3] = { MAR_CAN_COUNTS_NONE, MAR_CAN_COUNTS_NONE, MAR_CAN_COUNTS_NONE };
+    uint64_t bits = 5;
+    for (int k = 0; k < 3; k++)
+        bits |= (uint64_t)((uint32_t)v[k] & 0xFFFFFu) << (4 + 20 * k);
+    none.id = MAR_CAN_SETPOINT + 5;
+    none.dlc = 8;
+    for (int i = 0; i < 8; i++)
+        none.data[i] = (uint8_t)(bits >> (8 * i));
+    const struct { const char *name; mar_can_frame prefix, frame; } can[] = {
+        { "setpoint_pdo_without_channel", sync, none },
+        { "config_watchdog_65536", begin, can_frame(MAR_CAN_CONFIG + 5, MAR_CAN_PARAM_WATCHDOG, 0xFF, 0, 65536) },
+        { "config_begin_channel_0", sync, can_frame(MAR_CAN_CONFIG + 5, MAR_CAN_PARAM_BEGIN, 0, 0, 20000) },
+        { "config_reserved_byte", begin, can_frame(MAR_CAN_CONFIG + 5, MAR_CAN_PARAM_MIN, 0, 1, 0) },
+        { "config_apply_without_begin", sync, can_frame(MAR_CAN_CONFIG + 5, MAR_CAN_PARAM_APPLY, 0, 0, 7) },
+        { "status_reserved_flag", sync, can_frame(MAR_CAN_STATUS + 5, 5, 0x20, MAR_STATE_OPERATIONAL, 0) },
+    };
+    for (size_t i = 0; i < sizeof can / sizeof can[0]; i++) {
+        static mar_can_rx rx;
+        mar_can_rx_init(&rx);
+        mar_can_rx_feed(&rx, &can[i].prefix, &m);
+        r = mar_can_rx_feed(&rx, &can[i].frame, &m);
+        fprintf(f, ",\n  {\"name\": \"%s\", \"link\": \"can\", \"prefix\": ", can[i].name);
+        frames(f, &can[i].prefix, 1);
+        fprintf(f, ", \"frame\": ");
+        frames(f, &can[i].frame, 1);
+        fprintf(f, ", \"error\": \"%s\", \"reason\": %d}", error_name(r), mar_reason_of(r));
+    }
+    fprintf(f, "\n]\n");
+    return 0;
+}
+
 int main(int argc, char **argv)
 {
     static mar_msg ms[32];
@@ -286,6 +373,15 @@ int main(int argc, char **argv)
     snprintf(path, sizeof path, "%s/can.json", dir);
     f = fopen(path, "w");
     if (!f || write_can(f, ms, names, n) || fclose(f)) {
+        perror(path);
+        return 1;
+    }
+    size_t sixty = 0;
+    while (strcmp(names[sixty], "setpoints_60_channels") != 0)
+        sixty++;
+    snprintf(path, sizeof path, "%s/refused.json", dir);
+    f = fopen(path, "w");
+    if (!f || write_refused(f, &ms[sixty]) || fclose(f)) {
         perror(path);
         return 1;
     }

@@ -1,7 +1,7 @@
 """The ``marionette`` command.
 
     marionette play [SHOW] [--config FIGURE.toml] [--realtime] [--link ...] [--music ...]
-    marionette check | shape | calibrate | teach | plot | sim | sync-sim | log | demo ...
+    marionette check | shape | calibrate | teach | plot | sim | sync-sim | log | demo | conformance ...
     marionette bench tick|jitter|moves|fuzz|link|sync [...]
 
 One module per command (marionette/cli/<command>.py), each with
@@ -31,7 +31,7 @@ documentation is in docs/ and README.md."""
 # built: a module that imports marionette.cli.options (the benches do) does
 # not pull every command in with it
 COMMANDS = ("play", "check", "shape", "calibrate", "teach", "plot", "sim", "sync_sim", "log", "demo",
-            "bench")
+            "conformance", "bench")
 
 
 class TopHelpFormatter(HelpFormatter, argparse.RawDescriptionHelpFormatter):

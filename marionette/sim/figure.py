@@ -67,8 +67,9 @@ class SimFigure:
             node.advance_to(t)
 
     def handle(self, message, t: float, rejected: int = 0) -> list:
-        """Act on one message at model time t [s]; returns the answers (messages).
-        rejected: frames the link refused so far (reported in STATUS)."""
+        """Act on one message (or protocol.Refused frame) at model time t [s];
+        returns the answers (messages). rejected: frames the link refused so
+        far before their header could be believed (every node counts them)."""
         self.messages += 1
         kind = type(message)
         if kind is protocol.Sync:
@@ -90,6 +91,10 @@ class SimFigure:
             return []
         if kind is protocol.Config:
             return [a for sim in self._addressed(message.node) for a in sim.on_config(message, t)]
+        if kind is protocol.Refused and not message.type & protocol.FROM_NODE:
+            # another node's frame is none of ours (SPEC.md 6, Receiving)
+            alone = message.node != protocol.BROADCAST
+            return [a for sim in self._addressed(message.node) for a in sim.on_refused(message, alone)]
         return []                       # what nodes send, seen on a shared line
 
     def _listening(self, node: int) -> SimNode | None:

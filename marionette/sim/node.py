@@ -26,6 +26,7 @@ class NodeCounters:
     seq_gaps: int = 0           # tick counters skipped between setpoint messages
     clamped: int = 0            # setpoints clamped to the limits
     stale: int = 0              # setpoint frames older than the last accepted one
+    refused: int = 0            # frames for this node (or every node) whose content was refused
     ignored_estop: int = 0      # setpoints ignored while the e-stop is latched
     watchdog_trips: int = 0
 
@@ -55,8 +56,9 @@ class SimNode:
         self.nacked_estop = False               # told the host its setpoints are ignored
         self.pending_nack: protocol.Nack | None = None   # sent after the next STATUS
         self.last_sync: int | None = None
-        self.heartbeat_state: int | None = None # state in the last HEARTBEAT
+        self.heartbeat_state: int | None = None # state in the last HEARTBEAT (None: BOOT not sent)
         self.heartbeat_due = 0                  # SYNCs until the next HEARTBEAT
+        self.heartbeats = 0                     # HEARTBEATs sent: the next one's seq
 
     def counts_of(self, j: int, position: float) -> float:
         """Device counts of a position [unit] on channel j."""
@@ -105,9 +107,25 @@ class SimNode:
         self.watchdog = False
         self.following = True
 
+    def _nack_now(self, reason: int, ref_type: int, ref_seq: int) -> protocol.Nack:
+        """A NACK; its seq is the tick of the last SYNC (SPEC.md 6, HEARTBEAT)."""
+        return protocol.Nack(self.node, reason, ref_type, ref_seq, self.flags(), self.last_sync or 0)
+
     def _nack(self, reason: int, ref_type: int, ref_seq: int) -> None:
         if self.pending_nack is None:           # one per answer; more are only counted
-            self.pending_nack = protocol.Nack(self.node, reason, ref_type, ref_seq, self.flags())
+            self.pending_nack = self._nack_now(reason, ref_type, ref_seq)
+
+    def on_refused(self, refused: protocol.Refused, alone: bool) -> list:
+        """A frame for this node (alone) or every node whose content was
+        refused: counted; answered when addressed to this node alone, a
+        CONFIG's at once, the others after the next STATUS."""
+        self.counters.refused += 1
+        if not alone:
+            return []
+        if refused.type == protocol.CONFIG:
+            return [self._nack_now(refused.reason, refused.type, refused.seq)]
+        self._nack(refused.reason, refused.type, refused.seq)
+        return []
 
     def on_tick(self, tick: int) -> bool:
         """A setpoint frame for tick counter `tick` arrived: False when it is
@@ -159,7 +177,7 @@ class SimNode:
             for c in config.channels:
                 j = self.channels.index(c.channel)
                 self.min_counts[j], self.max_counts[j] = c.min_counts, c.max_counts
-        return [protocol.Nack(self.node, reason, protocol.CONFIG, config.seq, self.flags())]
+        return [self._nack_now(reason, protocol.CONFIG, config.seq)]
 
     def flags(self) -> int:
         f = 0
@@ -183,10 +201,12 @@ class SimNode:
 
     def answer(self, tick: int, rejected: int, noise: np.ndarray | None = None) -> list:
         """The answer to SYNC `tick`: STATUS (then LIMIT clears), a pending
-        NACK, and a HEARTBEAT when due."""
+        NACK, and a HEARTBEAT when due (BOOT in the first answer).
+        rejected: frames the link refused before their header could be believed."""
         state = self.state_code()
+        mine = self.counters.stale + self.counters.refused
         out = [protocol.Status(node=self.node, tick=tick, flags=self.flags(), state=state,
-                               rejected=(rejected + self.counters.stale) % 65536,
+                               rejected=(rejected + mine) % 65536,
                                seq_gaps=self.counters.seq_gaps % 65536,
                                positions=tuple(int(c) for c in self.actual_counts(noise)))]
         self.limited = False
@@ -194,8 +214,11 @@ class SimNode:
             out.append(self.pending_nack)
             self.pending_nack = None
         self.heartbeat_due -= 1
+        if self.heartbeat_state is None:
+            state = protocol.STATE_BOOT
         if state != self.heartbeat_state or self.heartbeat_due <= 0:
-            out.append(protocol.Heartbeat(self.node, state))
+            out.append(protocol.Heartbeat(self.node, state, self.heartbeats % (1 << 32)))
+            self.heartbeats += 1
             self.heartbeat_state, self.heartbeat_due = state, HEARTBEAT_TICKS
         return out
 

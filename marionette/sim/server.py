@@ -31,7 +31,6 @@ from marionette.sim.faults import Faults
 from marionette.sim.figure import SimFigure
 from marionette.sim.slcan import Pty, SlcanAdapter
 
-POLL = 0.001                # longest wait in the loop [s]
 IDLE_ADVANCE = 0.02         # the drives run on (watchdogs, quick stops) at least this often [s]
 
 
@@ -53,7 +52,7 @@ class SerialFrontEnd:
             data = os.read(self.fd, 65536)
         except BlockingIOError:
             return []
-        return self.deframer.feed(faults.mangle(data))
+        return self.deframer.feed(faults.mangle(data), refusals=True)
 
     def send(self, messages: list) -> None:
         if messages:
@@ -61,7 +60,9 @@ class SerialFrontEnd:
 
     @property
     def rejected(self) -> int:
-        return self.deframer.rejected
+        """Frames refused before their header could be believed (content
+        refusals come as protocol.Refused, for the node they address)."""
+        return self.deframer.rejected - self.deframer.counters["decode_errors"]
 
     def counters(self) -> dict:
         return self.deframer.counters
@@ -98,12 +99,10 @@ class SlcanFrontEnd:
             if faults.rng.random() < faults.drop_rate + faults.corrupt_rate * 8 * (len(payload) + 6):
                 self.frames_dropped += 1
                 continue
-            messages += self.decoder.feed(can_id, payload)
+            messages += self.decoder.feed(can_id, payload, refusals=True)
         return messages
 
-    @property
-    def rejected(self) -> int:
-        return self.decoder.rejected
+    rejected = 0        # the CAN controller drops a bad frame; every refusal names its node
 
     def send(self, messages: list) -> None:
         lines = b"".join(SlcanAdapter.encode(can_id, data)
@@ -208,7 +207,11 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
         # a terminal is read only while it has us in its foreground (a read
         # from the background would stop the process: SIGTTIN)
         listen = control is not None and (not tty or _in_foreground(control))
-        readable, _, _ = select.select([front.fd] + ([control] if listen else []), [], [], POLL)
+        # sleep until input, a delayed message is due, or the drives' next
+        # run (at most IDLE_ADVANCE: a terminal's foreground is checked again)
+        wait = pending[0][0] - now() if pending else figure.time + IDLE_ADVANCE - now()
+        readable, _, _ = select.select([front.fd] + ([control] if listen else []), [], [],
+                                       min(max(wait, 0.0), IDLE_ADVANCE))
         if control is not None and control in readable:
             line = control.readline()
             if not line:                    # stdin closed: run on

@@ -107,3 +107,32 @@ def test_without_acceleration_clipping_a_jump_shows_in_the_peak():
         m.set_command([x])
         m.advance(T)
     assert 0 < m.peak_accel[0] <= 20.0, m.peak_accel
+
+
+def test_resting_drives_skip_their_steps_exactly(figure):
+    """A drive at rest where it is commanded skips its fine steps in one go
+    (an idle simulator then costs nothing); the result is what stepping
+    every millisecond gives, through rests, moves, a quick stop and release."""
+    fast = ServoModel(figure.axes, T)
+    slow = ServoModel(figure.axes, T)
+    slow._resting = lambda: False                   # steps every millisecond
+    rng = np.random.default_rng(7)
+    lo, hi = np.array([a.min for a in figure.axes]), np.array([a.max for a in figure.axes])
+    home = np.array([a.home for a in figure.axes])
+    for k in range(12):
+        for m in (fast, slow):
+            if k in (2, 6):
+                m.set_command(home + (hi - home) * rng.uniform(0, 0.3, len(home)) if m is fast else target)
+            if k == 4:
+                m.brake()
+            if k == 5:
+                m.release()
+            m.advance(0.35)
+            if m is fast and k in (2, 6):
+                target = fast.command.copy()
+        np.testing.assert_array_equal(fast.position, slow.position)
+        np.testing.assert_array_equal(fast.velocity, slow.velocity)
+        np.testing.assert_array_equal(fast.peak_accel, slow.peak_accel)
+        assert fast._steps == slow._steps and fast.time == slow.time
+        if k == 1:
+            assert fast._resting()                  # at home and at rest: the skip is taken

@@ -41,10 +41,11 @@ def test_every_node_answers_every_sync_with_a_heartbeat_at_changes(figure):
     sim = SimFigure(figure)
     first = tick(sim, figure, 0)
     assert sorted(s.node for s in statuses(first)) == [1, 2, 3, 4, 5]
-    assert {a.state for a in first if isinstance(a, protocol.Heartbeat)} == {protocol.STATE_PRE_OPERATIONAL}
+    assert {(a.state, a.seq) for a in first if isinstance(a, protocol.Heartbeat)} == {(protocol.STATE_BOOT, 0)}
     second = tick(sim, figure, 1)
     assert {s.state for s in statuses(second)} == {protocol.STATE_OPERATIONAL}
-    assert {a.node for a in second if isinstance(a, protocol.Heartbeat)} == {1, 2, 3, 4, 5}
+    assert {(a.node, a.state, a.seq) for a in second if isinstance(a, protocol.Heartbeat)} == {
+        (n, protocol.STATE_OPERATIONAL, 1) for n in (1, 2, 3, 4, 5)}
     beats = [sum(isinstance(a, protocol.Heartbeat) for a in tick(sim, figure, k)) for k in range(2, 120)]
     assert sum(beats) == 2 * 5              # at least every 50 ticks, no more
     assert len(statuses(tick(sim, figure, 120, poll=3))) == 1    # a poll of one node
@@ -167,3 +168,56 @@ def test_loudness_answered_at_a_sync_measures_the_period_before_it(figure):
         frames.append(got[0].frame)
     assert frames == list(range(len(frames)))                          # the node's frame counter
     assert len(set(values)) > 100                                       # the level really moved
+
+
+def _sealed(body: bytes) -> bytes:
+    return protocol.cobs_encode(body + protocol.crc32c(body).to_bytes(4, "little")) + b"\0"
+
+
+def test_refused_frames_are_nacked_by_their_node_alone_and_counted_by_it(figure):
+    sim = SimFigure(figure)
+    deframer = protocol.Deframer()
+    tick(sim, figure, 0)
+    tick(sim, figure, 1)
+    estop = protocol.encode_body(protocol.Estop(2, seq=33))[:-4]
+    frames = {protocol.REASON_BAD_VERSION: b"\x02" + estop[1:],
+              protocol.REASON_BAD_TYPE: estop[:1] + b"\x42" + estop[2:],
+              protocol.REASON_BAD_LENGTH: estop + b"\x00"}
+    last_sync = 1
+    for reason, body in frames.items():
+        for refused in deframer.feed(_sealed(body), refusals=True):
+            assert sim.handle(refused, 0.03) == []
+        answers = tick(sim, figure, 2 + reason)
+        (nack,) = [a for a in answers if isinstance(a, protocol.Nack)]
+        assert (nack.node, nack.reason, nack.ref_type, nack.ref_seq, nack.seq) == (
+            2, reason, body[1], 33, last_sync)          # seq: the node's last SYNC before it
+        last_sync = 2 + reason
+    rejected = {s.node: s.rejected for s in statuses(tick(sim, figure, 9))}
+    assert rejected == {1: 0, 2: 3, 3: 0, 4: 0, 5: 0}
+    # addressed to a node not on this figure: ignored by all, not counted
+    for refused in deframer.feed(_sealed(protocol.encode_body(protocol.Estop(77))[:-4] + b"\0"),
+                                 refusals=True):
+        assert sim.handle(refused, 0.2) == []
+    answers = tick(sim, figure, 10)
+    assert {s.node: s.rejected for s in statuses(answers)} == rejected
+    assert not [a for a in answers if isinstance(a, protocol.Nack)]
+
+
+def test_can_config_incomplete_and_bad_value_are_nacked_at_once(figure):
+    sim = SimFigure(figure)
+    decoder = protocol.CanDecoder()
+    frames = protocol.encode_can(protocol.node_config(figure, 1, seq=12))
+    incomplete = [f for f in frames if f[1][0] != 0x13 or f[1][1] != 0]    # channel 0's ACCEL left out
+    got = [m for i, d in incomplete for m in decoder.feed(i, d, refusals=True)]
+    assert [type(m) for m in got] == [protocol.Refused]
+    (nack,) = sim.handle(got[0], 0.0)
+    assert (nack.node, nack.reason, nack.ref_type, nack.ref_seq) == (
+        1, protocol.REASON_CONFIG_INCOMPLETE, protocol.CONFIG, 12)
+    assert decoder.feed(*frames[0], refusals=True) == []                   # BEGIN
+    bad = (protocol.CAN_CONFIG + 1, bytes.fromhex("02ff000000000100"))     # WATCHDOG 65536
+    (refused,) = decoder.feed(*bad, refusals=True)
+    (nack,) = sim.handle(refused, 0.0)
+    assert nack.reason == protocol.REASON_BAD_VALUE and nack.ref_type == protocol.CONFIG
+    (config,) = [m for i, d in frames for m in decoder.feed(i, d, refusals=True)]
+    (ack,) = sim.handle(config, 0.0)
+    assert ack.reason == protocol.REASON_ACCEPTED and ack.ref_seq == 12
