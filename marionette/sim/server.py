@@ -27,10 +27,12 @@ import time
 import numpy as np
 
 from marionette import protocol
+from marionette.sim.arrival import ArrivalClock
 from marionette.sim.faults import Faults
 from marionette.sim.figure import SimFigure
 from marionette.sim.slcan import Pty, SlcanAdapter
 
+LATE_S = 0.03               # input read this much later than the wait asked for: this process was late [s]
 IDLE_ADVANCE = 0.02         # the drives run on (watchdogs, quick stops) at least this often [s]
 
 
@@ -201,6 +203,8 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
            t0: float) -> None:
     now = lambda: time.monotonic() - t0
     pending: list = []          # (due time [s], order, message): the delay fault
+    arrival = ArrivalClock(figure.config.tick_period)
+    looked = now()              # when the input was last read, or found empty [s]
     order = 0
     tty = control is not None and control.isatty()
     while seconds is None or now() < seconds:
@@ -210,8 +214,9 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
         # sleep until input, a delayed message is due, or the drives' next
         # run (at most IDLE_ADVANCE: a terminal's foreground is checked again)
         wait = pending[0][0] - now() if pending else figure.time + IDLE_ADVANCE - now()
-        readable, _, _ = select.select([front.fd] + ([control] if listen else []), [], [],
-                                       min(max(wait, 0.0), IDLE_ADVANCE))
+        timeout = min(max(wait, 0.0), IDLE_ADVANCE)                         # [s]
+        readable, _, _ = select.select([front.fd] + ([control] if listen else []), [], [], timeout)
+        returned = now()
         if control is not None and control in readable:
             line = control.readline()
             if not line:                    # stdin closed: run on
@@ -224,12 +229,23 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
                 except ValueError as exc:
                     say(error=str(exc))
         if front.fd in readable:
+            messages = front.receive(faults)
             t = now()
-            for m in front.receive(faults):
-                heapq.heappush(pending, (t + faults.delay, order, m))
+            # input read much later than the input was last looked at plus the wait
+            # asked for: this process was held off the CPU, and the input is timed
+            # by the host's tick clock since then (arrival.py); else as read
+            late = t - looked > timeout + LATE_S
+            times = arrival.times(messages, looked if late else t, t)
+            for m, at in zip(messages, times):
+                heapq.heappush(pending, (at + faults.delay, order, m))
                 order += 1
+            looked = t
+        else:
+            looked = returned
         while pending and pending[0][0] <= now():
             due, _, m = heapq.heappop(pending)
             front.send(figure.handle(m, due, front.rejected))
-        if not pending and now() - figure.time > IDLE_ADVANCE:     # no host: time goes on
-            figure.advance_to(now())
+        # no host: time goes on, as far as the input is known to have been empty
+        # (not past a stall of this process, whose input is still to be read)
+        if not pending and looked - figure.time > IDLE_ADVANCE:
+            figure.advance_to(looked)

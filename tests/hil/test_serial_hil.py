@@ -1,5 +1,6 @@
 """The engine, a real serial link (a pty) and `marionette sim` in its own
 process: tracking, watchdog, silent node, corrupted frames, e-stop."""
+import os
 import time
 import warnings
 
@@ -275,3 +276,34 @@ def test_a_normal_end_comes_to_rest_and_trips_no_watchdog(sim, figure, tmp_path)
         # (no check of peak_accel here: in real time the setpoints' arrival
         # jitter on a loaded machine alone moves it; tests/sim/test_stops.py
         # checks it on a virtual clock)
+
+
+def test_a_simulator_held_off_the_cpu_trips_no_watchdog_but_a_silent_host_does(sim, figure, tmp_path):
+    """The simulator process stopped (SIGSTOP) for 0.4 s mid-show: the host's
+    frames wait in the pty and are read together, timed by the host's tick
+    clock (marionette/sim/arrival.py), so no watchdog trips. The play
+    process stopped instead: its nodes hear nothing for 0.4 s and every
+    node's watchdog trips once."""
+    import signal
+    import subprocess
+    import sys
+    import tempfile
+    show = dance_from_home(figure, 3.0, seed=22, fraction=0.4)
+    path = tmp_path / "dance.npz"
+    show.save(path)
+    for stopped, trips in (("simulator", 0), ("host", 1)):
+        s = sim("--serial", "--priority", SIM_PRIORITY)
+        play = subprocess.Popen([sys.executable, "-m", "marionette.cli", "play", str(path), "--realtime",
+                                 "--priority", "0", "--link", f"serial:{s.ready['serial']}"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                cwd=tempfile.gettempdir())
+        time.sleep(1.5)                         # the show under way
+        pid = s.proc.pid if stopped == "simulator" else play.pid
+        os.kill(pid, signal.SIGSTOP)
+        time.sleep(0.4)                         # 20 ticks, the watchdog is 5
+        os.kill(pid, signal.SIGCONT)
+        out, err = play.communicate(timeout=60)
+        time.sleep(0.3)
+        summary = s.quit()
+        assert {n: c["watchdog_trips"] for n, c in summary["nodes"].items()} == \
+               {n: trips for n in summary["nodes"]}, (stopped, summary["nodes"], out, err)

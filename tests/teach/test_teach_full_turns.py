@@ -128,7 +128,11 @@ def test_a_dance_that_turns_twice_goes_through_teach(tmp_path):
     assert result.returncode == 0, result.stderr
     rot = load_show(tmp_path / "shaped.npz", config).positions[j]
     assert rot.min() >= axis.min and rot.max() <= axis.max
-    # the shaper finds no turn back that it has to cut short by much
+    # the shaper cuts no turn back by as much as a quarter turn. It plans for
+    # the lag-compensated command, whose speed budget is smaller than the
+    # show's: this dance's first turn back is cut by 1.2 rad (0.6 rad when the
+    # shaper planned for the show); a turn back that did not fit its time at
+    # all would be cut by most of a turn
     short = [float(x) for x in re.findall(r"'rotate_z' at [0-9.]+ s: short by ([0-9.e-]+) rad",
                                          result.stdout)]
-    assert max(short, default=0.0) < 1.0, result.stdout
+    assert max(short, default=0.0) < TURN / 4, result.stdout
