@@ -28,3 +28,26 @@ def test_the_public_names_load_when_used():
     for name in marionette.__all__:
         assert getattr(marionette, name) is not None
     assert marionette.transport.open_link.__name__ == "open_link"     # a subpackage, by attribute
+
+
+def test_the_simulator_process_does_not_load_the_engine(tmp_path):
+    """`marionette sim` builds the parser of its own command only: the running
+    simulator process has neither the engine's extension mapped nor the
+    other commands imported."""
+    import json
+    proc = subprocess.Popen([sys.executable, "-m", "marionette.cli", "sim", "--serial"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, cwd=tmp_path)
+    try:
+        assert json.loads(proc.stdout.readline()).get("ready")
+        with open(f"/proc/{proc.pid}/maps") as f:
+            maps = f.read()
+        # the follower's option tables, not the engine
+        assert "marionette/_core" not in maps and "marionette/_follow" in maps
+        loaded = _modules_after("from marionette.cli import build_parser\nbuild_parser(['sim'])")
+        assert "marionette._core" not in loaded and "marionette.cli.play" not in loaded
+        loaded = _modules_after("from marionette.cli import build_parser\nbuild_parser()")
+        assert "marionette.cli.play" in loaded                      # --help: every command
+    finally:
+        proc.kill()
+        proc.communicate()

@@ -50,11 +50,15 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The parser of every command; given the command line, of its command
+    alone when it names one (so `marionette sim`, the simulator process,
+    loads neither the engine nor the other commands)."""
     parser = Parser(prog="marionette", description=DESCRIPTION, formatter_class=TopHelpFormatter)
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
-    for name in COMMANDS:
+    named = [m for m in COMMANDS if argv and argv[0] == m.replace("_", "-")]
+    for name in named or COMMANDS:
         importlib.import_module(f"marionette.cli.{name}").register(sub)
     return parser
 
@@ -62,7 +66,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser(argv).parse_args(argv)
     except SystemExit as exc:      # --help, --version, or argparse's one-line error
         return exc.code
     try:
