@@ -204,5 +204,6 @@ def test_as_a_process_the_message_is_the_same(files, tmp_path):
                         (["play", "--rate", "100"], ["--rate", "'100'", "[0, 10]"]),
                         (["sim", "--drop", "2"], ["--drop", "'2'"])]:
         result = subprocess.run([sys.executable, "-m", "marionette.cli", *map(str, argv)],
-                                capture_output=True, text=True, timeout=60)
+                                capture_output=True, text=True, timeout=60,
+                                cwd=tmp_path)        # outside the source tree: the installed package
         assert_refused(result.returncode, result.stderr, argv, *names)

@@ -3,6 +3,7 @@ firmware_protocol/tools/bus_budget.py import marionette.protocol only, and do
 not load the C engine."""
 import subprocess
 import sys
+import tempfile
 
 import marionette
 
@@ -10,7 +11,8 @@ import marionette
 def _modules_after(code: str) -> set[str]:
     out = subprocess.run([sys.executable, "-c", code + "\nimport sys\n"
                           "print(' '.join(m for m in sys.modules if m.startswith('marionette')))"],
-                         capture_output=True, text=True, timeout=60, check=True).stdout
+                         capture_output=True, text=True, timeout=60, check=True,
+                         cwd=tempfile.gettempdir()).stdout     # the installed package, not the source tree
     return set(out.split())
 
 
