@@ -319,6 +319,13 @@ class Engine:
     def _at_show_end(self, rec) -> bool:
         return self._until_show_end and bool(rec["flags"] & _core.FLAG_END)
 
+    @staticmethod
+    def _fault_stopped(rec) -> bool:
+        """A fault reaction stopped the show and the figure holds: the show
+        will not go on (the latch holds to the end), so the run ends here."""
+        flags = rec["flags"]
+        return bool(flags & _core.FLAG_FAULT_STOP) and bool(flags & _core.FLAG_HOLDING)
+
     @property
     def running(self) -> bool:
         return self._core.running
@@ -358,9 +365,11 @@ class Engine:
             pass
 
     def wait(self, timeout: float | None = None) -> bool:
-        """Wait until the loop stops by itself (max_ticks); True if it did.
-        With end="hold" or "home" on a link: until the figure has come to
-        rest after max_ticks; then the loop stops and the nodes are told."""
+        """Wait until the loop stops by itself (max_ticks, the show's end with
+        until_show_end, or a fault reaction's stop once the figure holds);
+        True if it did. With end="hold" or "home" on a link: until the figure
+        has come to rest after max_ticks; then the loop stops and the nodes
+        are told."""
         if self._end_thread is not None:
             if not self._rested.wait(timeout):
                 return False
@@ -372,7 +381,7 @@ class Engine:
         end = None if timeout is None else time.monotonic() + timeout
         while self._core.running:
             rec = self._core.snapshot()
-            if rec is not None and self._at_show_end(rec):
+            if rec is not None and (self._at_show_end(rec) or self._fault_stopped(rec)):
                 _raise_for(self._core.stop(), "stopping the real-time loop")
                 return True
             if end is not None and time.monotonic() >= end:

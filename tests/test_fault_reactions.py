@@ -95,3 +95,41 @@ def test_no_fault_says_nothing():
         engine.step(50)
         records = engine.records()
     assert faults.summary(records, config, 0) == ([], 0)
+
+
+def test_the_overrun_threshold_stops_a_real_time_show():
+    """A real `play --realtime` process stopped (SIGSTOP) for 0.5 s mid-show
+    misses 25 ticks; with `[faults] overruns = 10` the show stops at its
+    limits, says so on stderr and in the summary, and exits 1."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import tempfile
+    import time
+    from pathlib import Path
+    from conftest import smooth_dance
+    from marionette.config import load_config
+    from marionette.recorder import read_flight_record
+    tmp = Path(tempfile.mkdtemp())
+    bundled = Path(load_config(None).source).read_text()
+    assert "[faults]" not in bundled
+    (tmp / "figure.toml").write_text(bundled + "\n[faults]\noverruns = 10\n")
+    config = load_config(tmp / "figure.toml")
+    make_show(config, smooth_dance(config, 200, np.random.default_rng(9))).save(tmp / "show.csv")
+    play = subprocess.Popen([sys.executable, "-m", "marionette.cli", "play", str(tmp / "show.csv"),
+                             "--config", str(tmp / "figure.toml"), "--realtime", "--priority", "0",
+                             "--headless", "--record", str(tmp / "flight.bin")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp)
+    time.sleep(1.5)
+    os.kill(play.pid, signal.SIGSTOP)
+    time.sleep(0.5)
+    os.kill(play.pid, signal.SIGCONT)
+    out, err = play.communicate(timeout=60)
+    assert play.returncode == 1, (out, err)
+    assert "real-time overruns" in err and "threshold 10" in err, err
+    assert "the show ended on a fault" in out, out
+    _, r = read_flight_record(tmp / "flight.bin")
+    stopped = (r["flags"] & _core.FLAG_FAULT_STOP) != 0
+    assert stopped.any() and stopped[-1] and not stopped[:50].any()
+    assert np.all(r["flags"][stopped] & _core.FLAG_OVERRUNS)
