@@ -319,12 +319,14 @@ class Engine:
     def _at_show_end(self, rec) -> bool:
         return self._until_show_end and bool(rec["flags"] & _core.FLAG_END)
 
-    @staticmethod
-    def _fault_stopped(rec) -> bool:
-        """A fault reaction stopped the show and the figure holds: the show
-        will not go on (the latch holds to the end), so the run ends here."""
+    def _fault_stopped(self, rec) -> bool:
+        """Running until the show's end, a fault reaction stopped the show and
+        the figure holds: the latch keeps the show from going on, so its end
+        would never come and the run ends here. (With max_ticks alone the run
+        goes on to them, holding.)"""
         flags = rec["flags"]
-        return bool(flags & _core.FLAG_FAULT_STOP) and bool(flags & _core.FLAG_HOLDING)
+        return (self._until_show_end and bool(flags & _core.FLAG_FAULT_STOP)
+                and bool(flags & _core.FLAG_HOLDING))
 
     @property
     def running(self) -> bool:
@@ -365,8 +367,8 @@ class Engine:
             pass
 
     def wait(self, timeout: float | None = None) -> bool:
-        """Wait until the loop stops by itself (max_ticks, the show's end with
-        until_show_end, or a fault reaction's stop once the figure holds);
+        """Wait until the loop stops by itself (max_ticks; with until_show_end
+        the show's end, or a fault reaction's stop once the figure holds);
         True if it did. With end="hold" or "home" on a link: until the figure
         has come to rest after max_ticks; then the loop stops and the nodes
         are told."""
