@@ -217,17 +217,6 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
         timeout = min(max(wait, 0.0), IDLE_ADVANCE)                         # [s]
         readable, _, _ = select.select([front.fd] + ([control] if listen else []), [], [], timeout)
         returned = now()
-        if control is not None and control in readable:
-            line = control.readline()
-            if not line:                    # stdin closed: run on
-                control = None
-            elif line.strip() == "quit":
-                return
-            elif line.strip():
-                try:
-                    say(ok=faults.apply(line.strip()))
-                except ValueError as exc:
-                    say(error=str(exc))
         if front.fd in readable:
             messages = front.receive(faults)
             t = now()
@@ -245,6 +234,19 @@ def _serve(figure: SimFigure, front, faults: Faults, seconds: float | None, cont
         while pending and pending[0][0] <= now():
             due, _, m = heapq.heappop(pending)
             front.send(figure.handle(m, due, front.rejected))
+        # control lines after the input read with them: 'quit' ends after the
+        # frames that had already arrived
+        if control is not None and control in readable:
+            line = control.readline()
+            if not line:                    # stdin closed: run on
+                control = None
+            elif line.strip() == "quit":
+                return
+            elif line.strip():
+                try:
+                    say(ok=faults.apply(line.strip()))
+                except ValueError as exc:
+                    say(error=str(exc))
         # no host: time goes on, as far as the input is known to have been empty
         # (not past a stall of this process, whose input is still to be read)
         if not pending and looked - figure.time > IDLE_ADVANCE:
