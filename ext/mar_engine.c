@@ -166,8 +166,9 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
     if (ok && opt->follow) {    /* refuses a show without finite, non-negative loudness (and onsets) */
         mar_follow_options follow_opt = opt->follow_opt;
         follow_opt.tick_period = opt->period;       /* the follower steps at the engine's tick */
-        ok = (e->follow = mar_follow_create_onsets(&follow_opt, e->loudness, onsets, n_ticks,
-                                                   status)) != NULL;
+        const mar_follow_music music = {.loudness = e->loudness, .onset = onsets, .bands = opt->follow_bands,
+                                        .n_bands = opt->follow_n_bands, .n = n_ticks};
+        ok = (e->follow = mar_follow_create_music(&follow_opt, &music, status)) != NULL;
     }
     if (!ok) {
         mar_engine_destroy(e);
@@ -525,11 +526,22 @@ int mar_engine_push_loudness(mar_engine *e, double value)
 
 int mar_engine_push_frame(mar_engine *e, double value, double onset)
 {
-    if (!isfinite(value) || value < 0.0 || !(isnan(onset) || (isfinite(onset) && onset >= 0.0))) {
+    return mar_engine_push_bands(e, value, onset, NULL, 0);
+}
+
+int mar_engine_push_bands(mar_engine *e, double value, double onset, const double *bands, size_t n_bands)
+{
+    live_frame frame = {.loudness = value, .onset = onset, .n_bands = n_bands};
+    int ok = isfinite(value) && value >= 0.0 && (isnan(onset) || (isfinite(onset) && onset >= 0.0))
+          && n_bands <= MAR_FOLLOW_MAX_BANDS;
+    for (size_t b = 0; ok && b < n_bands; b++) {
+        frame.bands[b] = bands[b];
+        ok = isfinite(bands[b]) && bands[b] >= 0.0;
+    }
+    if (!ok) {
         atomic_fetch_add(&e->bad_input, 1);
         return -EINVAL;
     }
-    live_frame frame = {.loudness = value, .onset = onset};
     return mar_ring_push(&e->loudness_in, &frame, sizeof frame);
 }
 

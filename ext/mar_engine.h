@@ -63,6 +63,9 @@ typedef struct {
     int follow;                 /* 1: the live music's follower drives position and rate (mar_follow.h) */
     mar_follow_options follow_opt;  /* used when follow is 1 */
     double follow_cue;          /* where the live music starts [show ticks] (mar_follow_cue); NaN: unknown */
+    const double *follow_bands; /* the taught band levels (n_ticks rows of follow_n_bands, linear), read
+                                 * at create only; NULL: the follower correlates the loudness */
+    size_t follow_n_bands;      /* 1 .. MAR_FOLLOW_MAX_BANDS with follow_bands */
     int follow_on_lost;         /* enum mar_on_lost, used when follow is 1 (0: flywheel) */
     int on_silent_node;         /* enum mar_fault_reaction (0: continue) */
     uint64_t max_overruns;      /* this many real-time overruns stop the show (latched); 0: never */
@@ -151,6 +154,10 @@ int mar_engine_seek(mar_engine *e, double position);      /* [show ticks] */
 int mar_engine_push_loudness(mar_engine *e, double value);   /* one 20 ms frame, >= 0 */
 /* The same with the frame's onset strength [dB] (>= 0; NaN: the source has none) */
 int mar_engine_push_frame(mar_engine *e, double value, double onset);
+/* The same with the frame's band levels (n_bands values, linear, >= 0;
+ * marionette/music/bands.py); -EINVAL for a bad value or more than
+ * MAR_FOLLOW_MAX_BANDS. */
+int mar_engine_push_bands(mar_engine *e, double value, double onset, const double *bands, size_t n_bands);
 /* alarms: bit i, the i-th node is silent or faulted (copied into every
  * record's node_alarms); silent: the nodes among them that are silent. The
  * next tick applies on_silent_node when silent is not 0 (or when the sink's

@@ -196,6 +196,20 @@ typedef struct {
     uint64_t sweep;             /* sweep that last scored it */
 } cand;
 
+/* A feature the correlations run on: `bands` values per frame (one for
+ * the loudness and the onset features), live and stored, and the stored
+ * side's block averages for the search. */
+typedef struct {
+    size_t bands;               /* values per frame; 0: the show has none */
+    double *ring;               /* live feature: ring[(step & hmask) * bands + b], NAN when missing */
+    double *buf;                /* stored: band b's frame j at buf[b * nfb + pad + j], j in [-pad, n + pad) */
+    double *q1, *q2;            /* prefix sums of each band (mar_corr_stored) */
+    double *blk;                /* coarse blocks: band b's block m at blk[b * ncb + cpad + m] */
+    double *c1, *c2;            /* their prefix sums, (ncb + 1) per band */
+    double lvl[MAR_CORR_MAX_BANDS];     /* running peak level of each live band [dB] */
+    int lvl_started;
+} channel;
+
 /* The options in ticks of opt.tick_period, as the step uses them (made at create). */
 typedef struct {
     double latency;             /* [ticks] */
@@ -220,27 +234,23 @@ struct mar_follow {
     tick_options tk;            /* ... in ticks */
     size_t n;                   /* stored frames */
     long pad;                   /* padding frames before and after the stored feature */
-    double *sf_buf, *sf;        /* stored feature sf[-pad .. n + pad) */
-    double *sdb_buf, *sdb;      /* stored level [dB], same layout */
-    double *p1, *p2;            /* prefix sums of sf and sf^2: p1[q] = sum of sf_buf[0 .. q) */
+    size_t nfb;                 /* stored frames per band with the padding: n + 2 pad */
+    double *sdb_buf, *sdb;      /* stored level [dB], sdb[-pad .. n + pad) */
     int onsets;                 /* 1: made with onsets; the tracker places its peak on the onset feature */
-    double *of_buf, *of;        /* stored onset feature: sf + onset_weight * onset, same layout */
-    double *o1, *o2;            /* its prefix sums */
     double s_level;             /* loud reference of the stored music [dB] */
+    channel level;              /* the loudness's level feature (one band) */
+    channel onset;              /* the onset feature: level + onset_weight * onset strength (one band) */
+    channel band;               /* the band levels' features (bands: 0 when the show has none) */
+    channel *main;              /* what the correlations use: band when the show and the newest frame
+                                 * have bands (smooth mode), else level */
 
-    size_t D, nc;               /* coarse block [ticks], coarse blocks */
+    size_t D, nc, ncb;          /* coarse block [ticks], coarse blocks, with the padding */
     long cpad;
-    double *sc_buf, *sc;        /* coarse stored feature sc[-cpad .. nc + cpad) */
-    double *c1, *c2;            /* its prefix sums */
 
-    /* live history, a ring indexed by step */
+    /* live history, a ring indexed by step (the features' rings too) */
     size_t hcap, hmask;
-    double *lf;                 /* feature, NAN when missing */
-    double *lo;                 /* onset feature, NAN when missing */
     double *ldb;                /* level [dB], NAN when missing */
     double *lpos;               /* position estimate at that step [stored ticks] */
-    double lvl;                 /* running peak level of the live stream [dB] */
-    int lvl_started;
     double nf;                  /* noise floor estimate [dB]: quietest live frame of the last 20 s */
     double floor_min[FLOOR_BLOCKS];  /* per block, its quietest frame [dB] */
     uint64_t floor_frames;      /* frames counted into the blocks */
@@ -307,13 +317,13 @@ struct mar_follow {
     double prev_rate, here_rate;
     size_t m_eff;               /* search window of this tick [coarse blocks] */
     size_t lc_cap;
-    double *lc;                 /* live blocks, newest first */
-    double *u;                  /* per rate: resampled live blocks, mean removed */
+    double *lc;                 /* live blocks, newest first: band b's at lc[b * lc_cap] */
+    double *u;                  /* per rate and band: resampled live blocks, mean removed */
     double unorm[MAX_RATES];
 
     /* scratch for resampling */
     size_t scap;
-    double *rs;                 /* resampled live values */
+    double *rs;                 /* resampled live values: band b's at rs[b * scap] */
 
     /* the cue (mar_follow_cue) */
     double cue_from;            /* the first audible stored frame at or after the cue [stored ticks] */
@@ -471,8 +481,11 @@ static int cmp_double(const void *a, const void *b)
 
 static size_t ring(const mar_follow *f, uint64_t step) { return (size_t)(step & f->hmask); }
 
-/* Live feature of age i (0 = newest); NAN when missing. */
-static double live_at(const mar_follow *f, size_t age) { return f->lf[ring(f, f->t - age)]; }
+/* Band b of the main feature's live frame of age i (0 = newest); NAN when missing. */
+static double live_at(const mar_follow *f, size_t age, size_t b)
+{
+    return f->main->ring[ring(f, f->t - age) * f->main->bands + b];
+}
 
 /* Ages of live frames usable from step `since` on, at most cap. */
 static size_t usable(const mar_follow *f, uint64_t since, size_t cap)
@@ -486,20 +499,114 @@ static size_t usable(const mar_follow *f, uint64_t since, size_t cap)
 mar_follow *mar_follow_create(const mar_follow_options *opt, const double *stored, size_t n_stored,
                               int *status)
 {
-    return mar_follow_create_onsets(opt, stored, NULL, n_stored, status);
+    const mar_follow_music music = {.loudness = stored, .n = n_stored};
+    return mar_follow_create_music(opt, &music, status);
 }
 
 mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double *stored,
                                      const double *onset, size_t n_stored, int *status)
 {
+    const mar_follow_music music = {.loudness = stored, .onset = onset, .n = n_stored};
+    return mar_follow_create_music(opt, &music, status);
+}
+
+static int channel_alloc(channel *ch, size_t bands, const mar_follow *f)
+{
+    ch->bands = bands;
+    if (!bands)
+        return 1;
+    ch->ring = malloc(f->hcap * bands * sizeof(double));
+    ch->buf = malloc(f->nfb * bands * sizeof(double));
+    ch->q1 = malloc((f->nfb + 1) * bands * sizeof(double));
+    ch->q2 = malloc((f->nfb + 1) * bands * sizeof(double));
+    ch->blk = malloc(f->ncb * bands * sizeof(double));
+    ch->c1 = malloc((f->ncb + 1) * bands * sizeof(double));
+    ch->c2 = malloc((f->ncb + 1) * bands * sizeof(double));
+    if (ch->ring)
+        for (size_t i = 0; i < f->hcap * bands; i++)
+            ch->ring[i] = NAN;
+    return ch->ring && ch->buf && ch->q1 && ch->q2 && ch->blk && ch->c1 && ch->c2;
+}
+
+static void channel_free(channel *ch)
+{
+    free(ch->ring);
+    free(ch->buf);
+    free(ch->q1);
+    free(ch->q2);
+    free(ch->blk);
+    free(ch->c1);
+    free(ch->c2);
+}
+
+/* Band b of a channel's stored feature from linear values x[i * stride]
+ * (i < n): the same map as live frames, its peak level starting at the
+ * loud reference (90th percentile) so that silence before the music reads
+ * as the floor, as it will live; the padding is that floor. Returns the
+ * loud reference [dB]; sorted: scratch of n. */
+static double stored_feature(mar_follow *f, channel *ch, size_t b, const double *x, size_t stride,
+                             double *sorted)
+{
+    double *v = ch->buf + b * f->nfb + f->pad;
+    for (size_t i = 0; i < f->n; i++)
+        sorted[i] = level_db(x[i * stride]);
+    qsort(sorted, f->n, sizeof(double), cmp_double);
+    double loud = sorted[(size_t)(0.9 * (double)(f->n - 1))];
+    double lvl = loud;
+    int started = 1;
+    for (size_t i = 0; i < f->n; i++)
+        v[i] = feature(&lvl, &started, level_db(x[i * stride]), f->opt.range_db, f->tk.level_release);
+    for (long i = 1; i <= f->pad; i++)
+        v[-i] = v[(long)f->n - 1 + i] = loud - f->opt.range_db;
+    return loud;
+}
+
+/* A channel's prefix sums, coarse blocks and their prefix sums, from its stored feature. */
+static void channel_sums(mar_follow *f, channel *ch)
+{
+    for (size_t b = 0; b < ch->bands; b++) {
+        const double *v = ch->buf + b * f->nfb;
+        double *q1 = ch->q1 + b * (f->nfb + 1), *q2 = ch->q2 + b * (f->nfb + 1);
+        q1[0] = q2[0] = 0.0;
+        for (size_t q = 0; q < f->nfb; q++) {
+            q1[q + 1] = q1[q] + v[q];
+            q2[q + 1] = q2[q] + v[q] * v[q];
+        }
+        double *blk = ch->blk + b * f->ncb + f->cpad;
+        for (long m = -f->cpad; m < (long)f->nc + f->cpad; m++) {
+            double sum = 0.0;
+            for (size_t k = 0; k < f->D; k++)
+                sum += v[f->pad + m * (long)f->D + (long)k];
+            blk[m] = sum / (double)f->D;
+        }
+        double *c1 = ch->c1 + b * (f->ncb + 1), *c2 = ch->c2 + b * (f->ncb + 1);
+        c1[0] = c2[0] = 0.0;
+        for (size_t q = 0; q < f->ncb; q++) {
+            c1[q + 1] = c1[q] + blk[(long)q - f->cpad];
+            c2[q + 1] = c2[q] + blk[(long)q - f->cpad] * blk[(long)q - f->cpad];
+        }
+    }
+}
+
+static int valid_values(const double *x, size_t count)
+{
+    for (size_t i = 0; i < count; i++)
+        if (!isfinite(x[i]) || x[i] < 0.0)
+            return 0;
+    return 1;
+}
+
+mar_follow *mar_follow_create_music(const mar_follow_options *opt, const mar_follow_music *music, int *status)
+{
     *status = -EINVAL;
     tick_options tk;
     const char *problem;
-    if (!opt || tick_options_of(opt, &tk, &problem) < 0 || !stored || n_stored < 2 || n_stored > ((size_t)1 << 28))
+    size_t n_stored = music ? music->n : 0, nb = music && music->bands ? music->n_bands : 0;
+    if (!opt || tick_options_of(opt, &tk, &problem) < 0 || !music->loudness || n_stored < 2
+        || n_stored > ((size_t)1 << 28) || (music->bands && (nb < 1 || nb > MAR_FOLLOW_MAX_BANDS))
+        || !valid_values(music->loudness, n_stored) || (music->onset && !valid_values(music->onset, n_stored))
+        || (music->bands && !valid_values(music->bands, n_stored * nb)))
         return NULL;
-    for (size_t i = 0; i < n_stored; i++)
-        if (!isfinite(stored[i]) || stored[i] < 0.0 || (onset && !(isfinite(onset[i]) && onset[i] >= 0.0)))
-            return NULL;
 
     *status = -ENOMEM;
     mar_follow *f = calloc(1, sizeof *f);
@@ -508,7 +615,7 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
     f->opt = *opt;
     f->tk = tk;
     f->n = n_stored;
-    f->onsets = onset != NULL;
+    f->onsets = music->onset != NULL;
     size_t longest = tk.window > tk.verify_window ? tk.window : tk.verify_window;
     if (longest < tk.long_verify)
         longest = tk.long_verify;
@@ -526,88 +633,46 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
     f->nc = (n_stored + f->D - 1) / f->D;
     f->cpad = (long)tk.search_window + 4;
     f->scap = (size_t)((double)f->hcap * opt->rate_max) + 8;
+    f->nfb = n_stored + 2 * (size_t)f->pad;
+    f->ncb = f->nc + 2 * (size_t)f->cpad;
+    size_t most = nb > 1 ? nb : 1;                  /* values per frame of the widest channel */
 
-    size_t nf = n_stored + 2 * (size_t)f->pad, ncb = f->nc + 2 * (size_t)f->cpad;
     f->n_rates = (size_t)floor((opt->rate_max - opt->rate_min) / tk.rate_step + 1e-9) + 1;
-    f->sf_buf = malloc(nf * sizeof(double));
-    f->sdb_buf = malloc(nf * sizeof(double));
-    f->p1 = malloc((nf + 1) * sizeof(double));
-    f->p2 = malloc((nf + 1) * sizeof(double));
-    f->of_buf = malloc(nf * sizeof(double));
-    f->o1 = malloc((nf + 1) * sizeof(double));
-    f->o2 = malloc((nf + 1) * sizeof(double));
-    f->lo = malloc(f->hcap * sizeof(double));
-    f->sc_buf = malloc(ncb * sizeof(double));
-    f->c1 = malloc((ncb + 1) * sizeof(double));
-    f->c2 = malloc((ncb + 1) * sizeof(double));
-    f->lf = malloc(f->hcap * sizeof(double));
+    f->sdb_buf = malloc(f->nfb * sizeof(double));
     f->ldb = malloc(f->hcap * sizeof(double));
     f->lpos = malloc(f->hcap * sizeof(double));
     f->lc_cap = (size_t)ceil((double)tk.search_window / opt->rate_min) + 4;
-    f->lc = malloc(f->lc_cap * sizeof(double));
-    f->u = malloc(f->n_rates * tk.search_window * sizeof(double));
-    f->rs = malloc(f->scap * sizeof(double));
+    f->lc = malloc(f->lc_cap * most * sizeof(double));
+    f->u = malloc(f->n_rates * most * tk.search_window * sizeof(double));
+    f->rs = malloc(f->scap * most * sizeof(double));
     double *sorted = malloc(n_stored * sizeof(double));
-    if (!f->sf_buf || !f->sdb_buf || !f->p1 || !f->p2 || !f->of_buf || !f->o1 || !f->o2 || !f->lo
-        || !f->sc_buf || !f->c1 || !f->c2 || !f->lf || !f->ldb || !f->lpos || !f->lc || !f->u || !f->rs
-        || !sorted) {
+    int ok = channel_alloc(&f->level, 1, f) & channel_alloc(&f->onset, 1, f) & channel_alloc(&f->band, nb, f);
+    if (!ok || !f->sdb_buf || !f->ldb || !f->lpos || !f->lc || !f->u || !f->rs || !sorted) {
         free(sorted);
         mar_follow_destroy(f);
         return NULL;
     }
-    f->sf = f->sf_buf + f->pad;
-    f->of = f->of_buf + f->pad;
     f->sdb = f->sdb_buf + f->pad;
-    f->sc = f->sc_buf + f->cpad;
+    f->main = &f->level;
 
-    /* stored feature: the same map as live frames, its peak level starting
-     * at the loud reference (90th percentile) so that silence before the
-     * music reads as the floor, as it will live */
-    for (size_t i = 0; i < n_stored; i++)
-        sorted[i] = level_db(stored[i]);
-    qsort(sorted, n_stored, sizeof(double), cmp_double);
-    f->s_level = sorted[(size_t)(0.9 * (double)(n_stored - 1))];
+    f->s_level = stored_feature(f, &f->level, 0, music->loudness, 1, sorted);
+    for (size_t b = 0; b < nb; b++)
+        stored_feature(f, &f->band, b, music->bands + b, nb, sorted);
     free(sorted);
-    double lvl = f->s_level;
-    int started = 1;
-    for (size_t i = 0; i < n_stored; i++) {
-        f->sdb[i] = level_db(stored[i]);
-        f->sf[i] = feature(&lvl, &started, f->sdb[i], opt->range_db, tk.level_release);
+    for (long i = -f->pad; i < (long)n_stored + f->pad; i++)
+        f->sdb[i] = i >= 0 && i < (long)n_stored ? level_db(music->loudness[i]) : level_db(0.0);
+    for (long i = -f->pad; i < (long)n_stored + f->pad; i++) {
+        double rise = music->onset && i >= 0 && i < (long)n_stored ? music->onset[i] : 0.0;     /* [dB] */
+        f->onset.buf[f->pad + i] = f->level.buf[f->pad + i] + opt->onset_weight * rise;
     }
-    double silence = f->s_level - opt->range_db;
-    for (long i = 1; i <= f->pad; i++) {
-        f->sf[-i] = silence;
-        f->sdb[-i] = level_db(0.0);
-        f->sf[(long)n_stored - 1 + i] = silence;
-        f->sdb[(long)n_stored - 1 + i] = level_db(0.0);
-    }
-    f->p1[0] = f->p2[0] = f->o1[0] = f->o2[0] = 0.0;
-    for (size_t q = 0; q < nf; q++) {
-        long i = (long)q - f->pad;
-        double rise = onset && i >= 0 && i < (long)n_stored ? onset[i] : 0.0;     /* [dB] */
-        f->of_buf[q] = f->sf_buf[q] + opt->onset_weight * rise;
-        f->p1[q + 1] = f->p1[q] + f->sf_buf[q];
-        f->p2[q + 1] = f->p2[q] + f->sf_buf[q] * f->sf_buf[q];
-        f->o1[q + 1] = f->o1[q] + f->of_buf[q];
-        f->o2[q + 1] = f->o2[q] + f->of_buf[q] * f->of_buf[q];
-    }
-    /* coarse blocks */
-    for (long m = -f->cpad; m < (long)f->nc + f->cpad; m++) {
-        double s = 0.0;
-        for (size_t k = 0; k < f->D; k++)
-            s += f->sf[m * (long)f->D + (long)k];
-        f->sc[m] = s / (double)f->D;
-    }
-    f->c1[0] = f->c2[0] = 0.0;
-    for (size_t q = 0; q < ncb; q++) {
-        f->c1[q + 1] = f->c1[q] + f->sc_buf[q];
-        f->c2[q + 1] = f->c2[q] + f->sc_buf[q] * f->sc_buf[q];
-    }
+    channel_sums(f, &f->level);
+    channel_sums(f, &f->onset);
+    channel_sums(f, &f->band);
     for (size_t k = 0; k < f->n_rates; k++)
         f->rates[k] = opt->rate_min + tk.rate_step * (double)k;
 
     for (size_t i = 0; i < f->hcap; i++)
-        f->lf[i] = f->lo[i] = f->ldb[i] = NAN, f->lpos[i] = 0.0;
+        f->ldb[i] = NAN, f->lpos[i] = 0.0;
     f->nf = INFINITY;
     for (int b = 0; b < FLOOR_BLOCKS; b++)
         f->floor_min[b] = INFINITY;
@@ -620,18 +685,10 @@ void mar_follow_destroy(mar_follow *f)
 {
     if (!f)
         return;
-    free(f->sf_buf);
+    channel_free(&f->level);
+    channel_free(&f->onset);
+    channel_free(&f->band);
     free(f->sdb_buf);
-    free(f->p1);
-    free(f->p2);
-    free(f->of_buf);
-    free(f->o1);
-    free(f->o2);
-    free(f->lo);
-    free(f->sc_buf);
-    free(f->c1);
-    free(f->c2);
-    free(f->lf);
     free(f->ldb);
     free(f->lpos);
     free(f->lc);
@@ -719,45 +776,46 @@ void mar_follow_cue(mar_follow *f, double position)
 
 /* --- correlation along a line ------------------------------------------ */
 
-/* The live history resampled along the line (p, r) onto whole stored
- * frames (mar_corr_resample), inside the padded piece with room for the
- * widest lags. */
-static size_t resample_ch(mar_follow *f, const double *ring_buf, double p, double r, size_t ages, long *j0,
+/* A channel's live history resampled along the line (p, r) onto whole
+ * stored frames (mar_corr_resample) into f->rs, inside the padded piece
+ * with room for the widest lags. */
+static size_t resample_ch(mar_follow *f, const channel *ch, double p, double r, size_t ages, long *j0,
                           double *center)
 {
-    const mar_corr_history live = {ring_buf, f->hmask, f->t};
+    const mar_corr_history live = {ch->ring, f->hmask, f->t, ch->bands};
     return mar_corr_resample(&live, ages, p, r, -f->pad + MAX_LAGS + 1, (long)f->n + f->pad - MAX_LAGS - 2,
                              f->scap, f->rs, j0, center);
 }
 
 static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0, double *center)
 {
-    return resample_ch(f, f->lf, p, r, ages, j0, center);
+    return resample_ch(f, f->main, p, r, ages, j0, center);
 }
 
-/* Pearson correlation of rs[k0 .. k0 + len) with the stored feature sfeat
- * (prefix sums q1, q2, all padded by f->pad) at frames j0 + k0 + d + k,
- * for d = -lags .. lags. Returns the live spread [dB]. */
-static double correlate_ch(const mar_follow *f, const double *sfeat, const double *q1, const double *q2,
-                           const double *rs, size_t k0, size_t len, long j0, int lags, double *rho)
+/* The correlation of f->rs[k0 .. k0 + len) (resampled from the same
+ * channel) with its stored feature at frames j0 + k0 + d + k, for d =
+ * -lags .. lags (mar_corr_lags). Returns the live spread [dB]. */
+static double correlate_ch(const mar_follow *f, const channel *ch, size_t k0, size_t len, long j0, int lags,
+                           double *rho)
 {
-    return mar_corr_lags(rs + k0, len, sfeat - f->pad, q1, q2, j0 + (long)k0 + f->pad, lags, rho);
+    const mar_corr_stored stored = {ch->buf, ch->q1, ch->q2, f->nfb, ch->bands};
+    return mar_corr_lags(f->rs + k0, f->scap, len, &stored, j0 + (long)k0 + f->pad, lags, rho);
 }
 
-static double correlate(const mar_follow *f, const double *rs, size_t k0, size_t len, long j0, int lags,
-                        double *rho)
+static double correlate(const mar_follow *f, size_t k0, size_t len, long j0, int lags, double *rho)
 {
-    return correlate_ch(f, f->sf, f->p1, f->p2, rs, k0, len, j0, lags, rho);
+    return correlate_ch(f, f->main, k0, len, j0, lags, rho);
 }
 
 /* --- the search ---------------------------------------------------------- */
 
-/* Live blocks of `coarse` frames, newest first, and for each rate of the
- * grid the blocks resampled to stored block spacing, mean removed. Sets
- * f->m_eff (0: too little live audio yet). */
+/* Live blocks of `coarse` frames of the main feature, newest first, and
+ * for each rate of the grid and each band the blocks resampled to stored
+ * block spacing, the band's mean removed. Sets f->m_eff (0: too little
+ * live audio yet). */
 static void prepare_search(mar_follow *f)
 {
-    const size_t D = f->D;
+    const size_t D = f->D, nb = f->main->bands, W = f->tk.search_window;
     size_t ages = usable(f, f->search_from, f->hcap);
     size_t nblocks = ages / D;
     if (nblocks > f->lc_cap)
@@ -767,74 +825,87 @@ static void prepare_search(mar_follow *f)
         return;
     size_t valid_blocks = 0;
     for (size_t b = 0; b < nblocks; b++) {
-        double s = 0.0;
         size_t cnt = 0;
-        for (size_t k = 0; k < D; k++) {
-            double v = live_at(f, b * D + k);
-            if (!isnan(v))
-                s += v, cnt++;
+        for (size_t k = 0; k < D; k++)
+            cnt += !isnan(live_at(f, b * D + k, 0));
+        for (size_t band = 0; band < nb; band++) {
+            double sum = 0.0;
+            for (size_t k = 0; k < D; k++) {
+                double v = live_at(f, b * D + k, band);
+                if (!isnan(v))
+                    sum += v;
+            }
+            f->lc[band * f->lc_cap + b] = cnt ? sum / (double)cnt : NAN;
         }
-        f->lc[b] = cnt ? s / (double)cnt : NAN;
         if (cnt)
             valid_blocks++;
     }
     /* blocks of the window in stored spacing: m in [0, m_eff) needs live block
      * (m + 0.5) / r - 0.5 < nblocks - 1 for the slowest rate */
     size_t m_eff = (size_t)floor(((double)nblocks - 0.5) * f->opt.rate_min - 0.5);
-    if (m_eff > f->tk.search_window)
-        m_eff = f->tk.search_window;
+    if (m_eff > W)
+        m_eff = W;
     if (m_eff < MIN_SEARCH_BLOCKS || valid_blocks < MIN_SEARCH_BLOCKS)
         return;
     double spread_sum = 0.0;
     for (size_t k = 0; k < f->n_rates; k++) {
-        double r = f->rates[k], *u = f->u + k * f->tk.search_window;
-        double sum = 0.0;
-        size_t cnt = 0;
-        for (size_t m = 0; m < m_eff; m++) {
-            double a = ((double)m + 0.5) / r - 0.5;
-            size_t i0 = (size_t)(a < 0.0 ? 0.0 : a);
-            double fr = a - (double)i0;
-            if (fr < 0.0)
-                fr = 0.0;
-            double v0 = f->lc[i0], v1 = i0 + 1 < nblocks ? f->lc[i0 + 1] : v0;
-            double v = isnan(v0) ? v1 : isnan(v1) ? v0 : v0 + fr * (v1 - v0);
-            u[m] = v;
-            if (!isnan(v))
-                sum += v, cnt++;
-        }
-        double mean = cnt ? sum / (double)cnt : 0.0, ss = 0.0;
-        for (size_t m = 0; m < m_eff; m++) {
-            u[m] = isnan(u[m]) ? 0.0 : u[m] - mean;
-            ss += u[m] * u[m];
+        double r = f->rates[k], ss = 0.0;
+        for (size_t band = 0; band < nb; band++) {
+            const double *lc = f->lc + band * f->lc_cap;
+            double *u = f->u + (k * nb + band) * W, sum = 0.0;
+            size_t cnt = 0;
+            for (size_t m = 0; m < m_eff; m++) {
+                double a = ((double)m + 0.5) / r - 0.5;
+                size_t i0 = (size_t)(a < 0.0 ? 0.0 : a);
+                double fr = a - (double)i0;
+                if (fr < 0.0)
+                    fr = 0.0;
+                double v0 = lc[i0], v1 = i0 + 1 < nblocks ? lc[i0 + 1] : v0;
+                double v = isnan(v0) ? v1 : isnan(v1) ? v0 : v0 + fr * (v1 - v0);
+                u[m] = v;
+                if (!isnan(v))
+                    sum += v, cnt++;
+            }
+            double mean = cnt ? sum / (double)cnt : 0.0;
+            for (size_t m = 0; m < m_eff; m++) {
+                u[m] = isnan(u[m]) ? 0.0 : u[m] - mean;
+                ss += u[m] * u[m];
+            }
         }
         f->unorm[k] = sqrt(ss);
-        spread_sum += sqrt(ss / (double)m_eff);
+        spread_sum += sqrt(ss / (double)(m_eff * nb));
     }
     if (spread_sum / (double)f->n_rates < f->opt.quiet_db)
         return;                                       /* too quiet or flat to search */
     f->m_eff = m_eff;
 }
 
-/* Coarse score of block offset o (now = stored position o * coarse) at rate k. */
+/* Coarse score of block offset o (now = stored position o * coarse) at
+ * rate k: the joint correlation over the main feature's bands. */
 static double coarse_score(const mar_follow *f, long o, size_t k)
 {
-    const size_t M = f->m_eff;
-    const double *u = f->u + k * f->tk.search_window;
-    const double *s = f->sc + o - 1;                  /* s[-m] is block o - 1 - m */
-    double a0 = 0.0, a1 = 0.0;
-    size_t m = 0;
-    for (; m + 2 <= M; m += 2) {
-        a0 += u[m] * s[-(long)m];
-        a1 += u[m + 1] * s[-(long)m - 1];
-    }
-    for (; m < M; m++)
-        a0 += u[m] * s[-(long)m];
+    const size_t M = f->m_eff, nb = f->main->bands;
+    double cov = 0.0, ss = 0.0;
     size_t qa = (size_t)(o - (long)M + f->cpad), qb = (size_t)(o + f->cpad);
-    double s1 = f->c1[qb] - f->c1[qa], s2 = f->c2[qb] - f->c2[qa];
-    double ss = s2 - s1 * s1 / (double)M;
+    for (size_t band = 0; band < nb; band++) {
+        const double *u = f->u + (k * nb + band) * f->tk.search_window;
+        const double *s = f->main->blk + band * f->ncb + f->cpad + o - 1;   /* s[-m] is block o - 1 - m */
+        double a0 = 0.0, a1 = 0.0;
+        size_t m = 0;
+        for (; m + 2 <= M; m += 2) {
+            a0 += u[m] * s[-(long)m];
+            a1 += u[m + 1] * s[-(long)m - 1];
+        }
+        for (; m < M; m++)
+            a0 += u[m] * s[-(long)m];
+        cov += a0 + a1;
+        const double *c1 = f->main->c1 + band * (f->ncb + 1), *c2 = f->main->c2 + band * (f->ncb + 1);
+        double s1 = c1[qb] - c1[qa], s2 = c2[qb] - c2[qa];
+        ss += s2 - s1 * s1 / (double)M;
+    }
     if (!(ss > 1e-9) || !(f->unorm[k] > 1e-9))
         return 0.0;
-    return (a0 + a1) / (f->unorm[k] * sqrt(ss));
+    return cov / (f->unorm[k] * sqrt(ss));
 }
 
 /* Fisher's z of a correlation: differences of z compare correlations fairly
@@ -980,7 +1051,7 @@ static int half_peaks_ch(mar_follow *f, int onset, double p, double r, size_t ag
 {
     long j0;
     double center;
-    size_t m = ages >= f->tk.min_window ? resample_ch(f, onset ? f->lo : f->lf, p, r, ages, &j0, &center) : 0;
+    size_t m = ages >= f->tk.min_window ? resample_ch(f, onset ? &f->onset : f->main, p, r, ages, &j0, &center) : 0;
     if (m < f->tk.fit_min)
         return 0;
     size_t h = m / 2;
@@ -988,9 +1059,9 @@ static int half_peaks_ch(mar_follow *f, int onset, double p, double r, size_t ag
     for (int half = 0; half < 2; half++) {
         size_t k0 = half ? h : 0, len = half ? m - h : h;
         if (onset)
-            correlate_ch(f, f->of, f->o1, f->o2, f->rs, k0, len, j0, VERIFY_LAGS, rho);
+            correlate_ch(f, &f->onset, k0, len, j0, VERIFY_LAGS, rho);
         else
-            correlate(f, f->rs, k0, len, j0, VERIFY_LAGS, rho);
+            correlate(f, k0, len, j0, VERIFY_LAGS, rho);
         hp[half].lag = mar_corr_peak(rho, VERIFY_LAGS, &hp[half].height, &hp[half].kappa, &hp[half].edge);
         double jmid = (double)j0 + (double)k0 + 0.5 * (double)(len - 1);
         hp[half].ctr = (p - 0.5 - jmid) / r;
@@ -1209,29 +1280,52 @@ static void note_floor(mar_follow *f, double db)
     f->nf = nf;
 }
 
-static void take_frame(mar_follow *f, double live, double onset, uint32_t *flags, int *have)
+/* A frame's values are usable: loudness, onset (NaN: none) and bands
+ * finite and >= 0. */
+static int valid_frame(const mar_follow_frame *fr)
+{
+    if (!isfinite(fr->loudness) || fr->loudness < 0.0 || !(isnan(fr->onset) || (isfinite(fr->onset) && fr->onset >= 0.0)))
+        return 0;
+    return fr->n_bands <= MAR_FOLLOW_MAX_BANDS && valid_values(fr->bands, fr->n_bands);
+}
+
+/* This step's live frame (NULL: none came) into the rings. The bands
+ * count where the show has them, as many: then the correlations run on
+ * them (smooth mode); a frame without (a one-band node) leaves a gap in
+ * the band feature and the correlations run on the loudness. */
+static void take_frame(mar_follow *f, const mar_follow_frame *fr, uint32_t *flags, int *have)
 {
     size_t slot = ring(f, f->t);
     *have = 0;
-    f->lf[slot] = f->lo[slot] = NAN;
+    f->level.ring[slot] = f->onset.ring[slot] = NAN;
+    for (size_t b = 0; b < f->band.bands; b++)
+        f->band.ring[slot * f->band.bands + b] = NAN;
     f->ldb[slot] = NAN;
-    if (isnan(live)) {
+    if (!fr) {
         *flags |= MAR_FOLLOW_F_NO_FRAME;
         f->c.missing++;
         return;
     }
-    int bad_onset = f->onsets && !(isnan(onset) || (isfinite(onset) && onset >= 0.0));
-    if (!isfinite(live) || live < 0.0 || bad_onset) {
+    if (!valid_frame(fr)) {
         *flags |= MAR_FOLLOW_F_BAD_INPUT | MAR_FOLLOW_F_NO_FRAME;
         f->c.bad_input++;
         return;
     }
-    double db = level_db(live);
+    double db = level_db(fr->loudness);
     f->ldb[slot] = db;
-    f->lf[slot] = feature(&f->lvl, &f->lvl_started, db, f->opt.range_db, f->tk.level_release);
+    f->level.ring[slot] = feature(&f->level.lvl[0], &f->level.lvl_started, db, f->opt.range_db,
+                                  f->tk.level_release);
     /* a frame without its onset (a source that has none) leaves a gap in the
      * onset feature; a window without onsets tracks on the loudness alone */
-    f->lo[slot] = f->lf[slot] + (f->onsets ? f->opt.onset_weight * onset : 0.0);
+    f->onset.ring[slot] = f->level.ring[slot] + (f->onsets ? f->opt.onset_weight * fr->onset : 0.0);
+    int bands = f->band.bands && fr->n_bands == f->band.bands && f->opt.mode == MAR_FOLLOW_SMOOTH;
+    for (size_t b = 0; bands && b < f->band.bands; b++) {
+        int started = f->band.lvl_started;
+        f->band.ring[slot * f->band.bands + b] = feature(&f->band.lvl[b], &started, level_db(fr->bands[b]),
+                                                         f->opt.range_db, f->tk.level_release);
+    }
+    f->band.lvl_started |= bands;
+    f->main = bands ? &f->band : &f->level;
     note_floor(f, db);
     f->c.frames++;
     *have = 1;
@@ -1376,7 +1470,7 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
     int lags = span < TRACK_LAGS ? TRACK_LAGS : span > WIDE_LAGS ? WIDE_LAGS : (int)span;
     double rho[2 * MAX_LAGS + 1], h, kappa;
     int edge;
-    double spread = correlate(f, f->rs, 0, m, j0, lags, rho);
+    double spread = correlate(f, 0, m, j0, lags, rho);
     if (spread < f->opt.quiet_db) {
         *quiet = 1;
         return 0;
@@ -1389,8 +1483,8 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
         /* the onset feature places the peak: rises survive a room's colouring */
         double rho2[2 * MAX_LAGS + 1], h2, kappa2;
         int edge2;
-        if (resample_ch(f, f->lo, f->kf.p, f->kf.r, ages, &j0, &c) == m) {      /* 0: no onsets in the window */
-            correlate_ch(f, f->of, f->o1, f->o2, f->rs, 0, m, j0, lags, rho2);
+        if (resample_ch(f, &f->onset, f->kf.p, f->kf.r, ages, &j0, &c) == m) {      /* 0: no onsets in the window */
+            correlate_ch(f, &f->onset, 0, m, j0, lags, rho2);
             double d2 = mar_corr_peak(rho2, lags, &h2, &kappa2, &edge2);
             if (!edge2 && kappa2 > 0.0)
                 d = d2, kappa = kappa2;
@@ -1425,7 +1519,7 @@ static int track_paper(mar_follow *f, int *quiet, int *step, uint32_t *flags)
     if (m < 8)
         return 0;
     double rho[3];
-    double spread = correlate(f, f->rs, 0, m, j0, 1, rho);
+    double spread = correlate(f, 0, m, j0, 1, rho);
     if (spread < f->opt.quiet_db) {
         *quiet = 1;
         return 0;
@@ -1511,7 +1605,7 @@ static int music_started(mar_follow *f, int have, uint64_t *onset)
     /* a note: hiss and a room's noise read under about 1 dB of onsets, a
      * note's attack several times that */
     size_t slot = ring(f, f->t);
-    double strength = f->onsets && f->opt.onset_weight > 0.0 ? (f->lo[slot] - f->lf[slot]) / f->opt.onset_weight
+    double strength = f->onsets && f->opt.onset_weight > 0.0 ? (f->onset.ring[slot] - f->level.ring[slot]) / f->opt.onset_weight
                                                              : NAN;     /* NaN: the level decides */
     if (strength > NOTE_DB) {
         *onset = f->leader < f->tk.leader ? f->wait_start : f->rise_step ? f->rise_step : f->t;
@@ -1583,8 +1677,7 @@ static void play_from_cue(mar_follow *f, uint64_t onset)
 static double line_fit_ch(mar_follow *f, int onset, size_t ages, double *best_r, double *best_d,
                           double *best_kappa)
 {
-    const double *ring_buf = onset ? f->lo : f->lf, *sfeat = onset ? f->of : f->sf;
-    const double *q1 = onset ? f->o1 : f->p1, *q2 = onset ? f->o2 : f->p2;
+    const channel *ch = onset ? &f->onset : f->main;
     double best = NAN;                                          /* no evidence yet */
     *best_r = 1.0, *best_d = *best_kappa = 0.0;
     int steps = (int)(CUE_RATE_SPAN / CUE_RATE_STEP + 0.5);
@@ -1594,10 +1687,10 @@ static double line_fit_ch(mar_follow *f, int onset, size_t ages, double *best_r,
         long j0;
         double c, rho[2 * CUE_LAGS + 1], h, kappa;
         int edge;
-        size_t m = resample_ch(f, ring_buf, p, r, ages, &j0, &c);
+        size_t m = resample_ch(f, ch, p, r, ages, &j0, &c);
         if (m < ages / 2)
             continue;
-        if (correlate_ch(f, sfeat, q1, q2, f->rs, 0, m, j0, CUE_LAGS, rho) < f->opt.quiet_db)
+        if (correlate_ch(f, ch, 0, m, j0, CUE_LAGS, rho) < f->opt.quiet_db)
             continue;                                           /* flat: no evidence */
         double d = mar_corr_peak(rho, CUE_LAGS, &h, &kappa, &edge);
         if (isnan(best))
@@ -1630,7 +1723,7 @@ static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
 {
     double rho[2 * MAX_LAGS + 1], best = -1.0;
     for (long c = -j0 + MAX_LAGS; c - MAX_LAGS <= (long)f->n - j0 - (long)m; c += 2 * MAX_LAGS + 1) {
-        correlate(f, f->rs, 0, m, j0 + c, MAX_LAGS, rho);
+        correlate(f, 0, m, j0 + c, MAX_LAGS, rho);
         for (int i = 0; i <= 2 * MAX_LAGS; i++) {
             long off = c + i - MAX_LAGS;
             if (fabs((double)off - d) > DISTINCT && rho[i] > best)
@@ -1720,10 +1813,11 @@ static double line_score(mar_follow *f, int ch, double p, double r, size_t ages)
 {
     long j0;
     double c, rho[1];
-    size_t m = resample_ch(f, ch ? f->lo : f->lf, p, r, ages, &j0, &c);
+    const channel *c_ch = ch ? &f->onset : f->main;
+    size_t m = resample_ch(f, c_ch, p, r, ages, &j0, &c);
     if (m < ages / 2)
         return -1.0;
-    correlate_ch(f, ch ? f->of : f->sf, ch ? f->o1 : f->p1, ch ? f->o2 : f->p2, f->rs, 0, m, j0, 0, rho);
+    correlate_ch(f, c_ch, 0, m, j0, 0, rho);
     return rho[0];
 }
 
@@ -1820,7 +1914,7 @@ static double near_peak(mar_follow *f, double centre, double *h_out)
         return NAN;
     double rho[2 * NEAR_RIVAL_LAGS + 1], h, kappa;
     int edge;
-    if (correlate(f, f->rs, 0, m, j0, NEAR_LAGS, rho) < f->opt.quiet_db)
+    if (correlate(f, 0, m, j0, NEAR_LAGS, rho) < f->opt.quiet_db)
         return NAN;
     double d = mar_corr_peak(rho, NEAR_LAGS, &h, &kappa, &edge);
     *h_out = h;
@@ -1829,7 +1923,7 @@ static double near_peak(mar_follow *f, double centre, double *h_out)
         return NAN;
     /* a clear peak within reach: only now the rivals beyond it (three
      * times the lags, so three times the work) */
-    correlate(f, f->rs, 0, m, j0, NEAR_RIVAL_LAGS, rho);
+    correlate(f, 0, m, j0, NEAR_RIVAL_LAGS, rho);
     if (fisher(h) - fisher(best_rival(rho, NEAR_RIVAL_LAGS, d)) < lead)
         return NAN;
     return d;
@@ -2223,12 +2317,21 @@ void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
     mar_follow_step_onset(f, live, NAN, out);
 }
 
+static void step_frame(mar_follow *f, const mar_follow_frame *frame, mar_follow_out *out);
+
 void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_out *out)
+{
+    const mar_follow_frame frame = {.loudness = live, .onset = onset};
+    step_frame(f, isnan(live) ? NULL : &frame, out);
+}
+
+/* One step with this frame (NULL: none). */
+static void step_frame(mar_follow *f, const mar_follow_frame *frame, mar_follow_out *out)
 {
     uint32_t flags = 0;
     int have;
     f->c.steps++;
-    take_frame(f, live, onset, &flags, &have);
+    take_frame(f, frame, &flags, &have);
 
     /* 1. the clock: where the music is now, before this frame is looked at */
     int resumed = 0;
@@ -2323,13 +2426,12 @@ size_t mar_follow_tick(mar_follow *f, const mar_follow_frame *frames, size_t n, 
         n = MAR_FOLLOW_TICK_FRAMES;
     size_t used = 0;
     for (size_t i = 0; i < n; i++) {
-        double live = frames[i].loudness, onset = frames[i].onset;
-        if (!isfinite(live) || live < 0.0 || !(isnan(onset) || (isfinite(onset) && onset >= 0.0))) {
+        if (!valid_frame(&frames[i])) {
             flags |= MAR_FOLLOW_F_BAD_INPUT;        /* refused as a source would: no step */
             f->c.bad_input++;
             continue;
         }
-        mar_follow_step_onset(f, live, onset, &step);
+        step_frame(f, &frames[i], &step);
         flags |= step.flags;
         used++;
     }
@@ -2340,7 +2442,7 @@ size_t mar_follow_tick(mar_follow *f, const mar_follow_frame *frames, size_t n, 
         f->unstepped += elapsed;
         if (f->ticks_since_frame > MAR_FOLLOW_FRAME_TIMEOUT) {     /* the source is silent: step without */
             for (int64_t k = 0; k < f->unstepped && k < MAX_CATCH_UP; k++) {
-                mar_follow_step_onset(f, NAN, NAN, &step);
+                step_frame(f, NULL, &step);
                 flags |= step.flags;
             }
             f->unstepped = 0;

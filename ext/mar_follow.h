@@ -36,6 +36,10 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "mar_follow_corr.h"
+
+#define MAR_FOLLOW_MAX_BANDS MAR_CORR_MAX_BANDS     /* band levels per frame, at most */
+
 enum mar_follow_mode {
     MAR_FOLLOW_SMOOTH = 0,          /* fractional position and rate (default) */
     MAR_FOLLOW_PAPER = 1,           /* double or skip one stored sample per tick */
@@ -147,7 +151,18 @@ typedef struct {
 typedef struct {
     double loudness;            /* linear [full scale] */
     double onset;               /* onset strength [dB]; NaN: the source has none */
+    size_t n_bands;             /* band levels in bands[]; 0: the source measures none */
+    double bands[MAR_FOLLOW_MAX_BANDS];     /* linear [full scale] (marionette/music/bands.py) */
 } mar_follow_frame;
+
+/* The taught music as the follower takes it: n frames, one per tick. */
+typedef struct {
+    const double *loudness;     /* n values, linear [full scale], finite and >= 0 */
+    const double *onset;        /* n onset strengths [dB], finite and >= 0; NULL: none */
+    const double *bands;        /* n rows of n_bands band levels, linear, finite and >= 0; NULL: none */
+    size_t n_bands;             /* 1 .. MAR_FOLLOW_MAX_BANDS with bands */
+    size_t n;                   /* frames, >= 2 */
+} mar_follow_music;
 
 /* mar_follow_tick: frames taken in one tick, at most; ticks without a frame
  * before the follower steps without one (the source may deliver in blocks). */
@@ -176,6 +191,13 @@ mar_follow *mar_follow_create(const mar_follow_options *opt, const double *store
  * opt.onset_weight times the onset (live onsets through mar_follow_step_onset). */
 mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double *stored,
                                      const double *onset, size_t n_stored, int *status);
+/* The same from the music's loudness, onsets and band levels (see
+ * mar_follow_music; -EINVAL for a value outside it). With bands, the
+ * correlations (tracking, search, cue) run jointly over the bands, each
+ * band's mean taken out per window, on every window whose newest frame
+ * brought as many bands (mar_follow_tick); others, and paper mode, on the
+ * loudness. */
+mar_follow *mar_follow_create_music(const mar_follow_options *opt, const mar_follow_music *music, int *status);
 void mar_follow_destroy(mar_follow *f);
 
 /* One step: one live loudness frame (linear, >= 0), or NaN for a step

@@ -18,7 +18,8 @@ size_t mar_corr_resample(const mar_corr_history *live, size_t ages, double p, do
         m = cap, ja = jb - (long)m + 1;
     if (ja < lo || jb > hi)
         return 0;
-    double sum = 0.0, csum = 0.0;
+    const size_t nb = live->bands;
+    double csum = 0.0;
     size_t valid = 0;
     for (size_t k = 0; k < m; k++) {
         double a = (p - 0.5 - (double)(ja + (long)k)) / r - 0.5;   /* live age of this stored frame */
@@ -26,59 +27,70 @@ size_t mar_corr_resample(const mar_corr_history *live, size_t ages, double p, do
             a = 0.0;
         size_t i0 = (size_t)a;
         double fr = a - (double)i0;
-        double v0 = live->v[(live->t - i0) & live->mask];
-        double v = v0;
-        if (fr > 0.0 && i0 + 1 < ages) {
-            double v1 = live->v[(live->t - (i0 + 1)) & live->mask];
-            v = v0 + fr * (v1 - v0);
-        }
-        out[k] = v;
-        if (!isnan(v)) {
-            sum += v;
+        const double *v0 = live->v + ((live->t - i0) & live->mask) * nb;
+        const double *v1 = fr > 0.0 && i0 + 1 < ages ? live->v + ((live->t - (i0 + 1)) & live->mask) * nb : v0;
+        for (size_t b = 0; b < nb; b++)
+            out[b * cap + k] = v0[b] + fr * (v1[b] - v0[b]);        /* NaN when either is missing */
+        if (!isnan(out[k])) {
             csum += a + 0.5;
             valid++;
         }
     }
     if (valid < 2)
         return 0;
-    double mean = sum / (double)valid;
-    for (size_t k = 0; k < m; k++)
-        out[k] = isnan(out[k]) ? 0.0 : out[k] - mean;
+    for (size_t b = nb; b-- > 0;) {          /* band 0, which marks the missing frames, last */
+        double *o = out + b * cap, sum = 0.0;
+        for (size_t k = 0; k < m; k++)
+            if (!isnan(out[k]))
+                sum += o[k];
+        double mean = sum / (double)valid;
+        for (size_t k = 0; k < m; k++)
+            o[k] = isnan(out[k]) ? 0.0 : o[k] - mean;
+    }
     *j0 = ja;
     *center = csum / (double)valid;
     return m;
 }
 
-double mar_corr_lags(const double *live, size_t len, const double *stored, const double *q1,
-                     const double *q2, long at, int lags, double *rho)
+double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_stored *stored, long at,
+                     int lags, double *rho)
 {
-    double lm = 0.0;
-    for (size_t k = 0; k < len; k++)
-        lm += live[k];
-    lm /= (double)len;
-    double ll = 0.0;
-    for (size_t k = 0; k < len; k++)
-        ll += (live[k] - lm) * (live[k] - lm);
+    const size_t nb = stored->bands;
+    double lm[MAR_CORR_MAX_BANDS], ll = 0.0;
+    for (size_t b = 0; b < nb; b++) {
+        const double *l = live + b * cap;
+        double sum = 0.0, ss = 0.0;
+        for (size_t k = 0; k < len; k++)
+            sum += l[k];
+        lm[b] = sum / (double)len;
+        for (size_t k = 0; k < len; k++)
+            ss += (l[k] - lm[b]) * (l[k] - lm[b]);
+        ll += ss;
+    }
     for (int d = -lags; d <= lags; d++) {
         long js = at + d;
-        const double *s = stored + js;
-        double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
-        size_t k = 0;
-        for (; k + 4 <= len; k += 4) {                 /* four sums: independent adds */
-            a0 += (live[k] - lm) * s[k];
-            a1 += (live[k + 1] - lm) * s[k + 1];
-            a2 += (live[k + 2] - lm) * s[k + 2];
-            a3 += (live[k + 3] - lm) * s[k + 3];
+        double cov = 0.0, ss = 0.0;
+        for (size_t b = 0; b < nb; b++) {
+            const double *l = live + b * cap, *s = stored->v + b * stored->stride + js, m = lm[b];
+            double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+            size_t k = 0;
+            for (; k + 4 <= len; k += 4) {             /* four sums: independent adds */
+                a0 += (l[k] - m) * s[k];
+                a1 += (l[k + 1] - m) * s[k + 1];
+                a2 += (l[k + 2] - m) * s[k + 2];
+                a3 += (l[k + 3] - m) * s[k + 3];
+            }
+            for (; k < len; k++)
+                a0 += (l[k] - m) * s[k];
+            cov += a0 + a1 + a2 + a3;
+            const double *q1 = stored->q1 + b * (stored->stride + 1), *q2 = stored->q2 + b * (stored->stride + 1);
+            size_t q = (size_t)js;
+            double s1 = q1[q + len] - q1[q], s2 = q2[q + len] - q2[q];
+            ss += s2 - s1 * s1 / (double)len;
         }
-        for (; k < len; k++)
-            a0 += (live[k] - lm) * s[k];
-        double cov = a0 + a1 + a2 + a3;
-        size_t q = (size_t)js;
-        double s1 = q1[q + len] - q1[q], s2 = q2[q + len] - q2[q];
-        double ss = s2 - s1 * s1 / (double)len;
-        rho[d + lags] = (ll > 1e-9 && ss > 1e-9) ? cov / sqrt(ll * ss) : 0.0;
+        rho[d + lags] = (ll > 1e-9 * (double)nb && ss > 1e-9 * (double)nb) ? cov / sqrt(ll * ss) : 0.0;
     }
-    return sqrt(ll / (double)len);
+    return sqrt(ll / ((double)len * (double)nb));
 }
 
 double mar_corr_peak(const double *rho, int lags, double *height, double *kappa, int *edge)

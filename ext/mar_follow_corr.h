@@ -21,30 +21,50 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* The live history as a ring: v[step & mask] is the frame of that step
- * (NaN: none came), t the newest step. */
+/* Bands. A feature may have several values per frame (the level in a few
+ * frequency bands). Each band's mean is taken out per window (a volume
+ * knob and a fixed colouring are constant offsets per band), then one
+ * correlation runs over every band and frame together: a band that moves
+ * more weighs more. One band is the plain Pearson correlation. */
+
+#define MAR_CORR_MAX_BANDS 8     /* values per frame, at most */
+
+/* The live history as a ring: v[(step & mask) * bands + b] is band b of
+ * the frame of that step (NaN: none came), t the newest step. */
 typedef struct {
     const double *v;
     size_t mask;                /* ring size - 1 (a power of 2) */
     uint64_t t;                 /* newest step */
+    size_t bands;               /* values per frame, >= 1 */
 } mar_corr_history;
+
+/* The stored side: band b's frame j at v[b * stride + j], its prefix sums
+ * q1[b * (stride + 1) + q] = sum of v[b * stride + 0 .. q), q2 the same of
+ * squares. */
+typedef struct {
+    const double *v, *q1, *q2;
+    size_t stride;              /* frames per band [1] */
+    size_t bands;               /* as the live side's */
+} mar_corr_stored;
 
 /* The live frames of ages 0 .. ages - 1 resampled along the line (p, r)
  * onto whole stored frames j0 .. j0 + m - 1 (linear between live frames),
- * at most cap, the newest kept; into out, mean removed, missing frames at
- * the mean (they add nothing to a covariance). Returns m, 0 when fewer
- * than 2 values or the frames would leave [lo, hi]; *center: the mean
- * (age + 0.5) of the samples [ticks], the window's centre in the past. */
+ * at most cap, the newest kept; band b into out[b * cap ..], its mean
+ * removed, missing frames at the mean (they add nothing to a covariance).
+ * Returns m, 0 when fewer than 2 values or the frames would leave [lo,
+ * hi]; *center: the mean (age + 0.5) of the samples [ticks], the window's
+ * centre in the past. */
 size_t mar_corr_resample(const mar_corr_history *live, size_t ages, double p, double r, long lo, long hi,
                          size_t cap, double *out, long *j0, double *center);
 
-/* Pearson correlation of live[0 .. len) with stored[at + d .. at + d +
- * len), for d = -lags .. lags, into rho[d + lags] (0 where either side is
- * flat). stored[at - lags .. at + lags + len) and q1, q2 up to index at +
- * lags + len must exist. Returns the live window's spread (its standard
- * deviation, in the unit of live: [dB] for the loudness feature). */
-double mar_corr_lags(const double *live, size_t len, const double *stored, const double *q1,
-                     const double *q2, long at, int lags, double *rho);
+/* The joint correlation (above) of live[b * cap + 0 .. len) with the
+ * stored frames at + d .. at + d + len of every band, for d = -lags ..
+ * lags, into rho[d + lags] (0 where either side is flat). Stored frames at
+ * - lags .. at + lags + len and their prefix sums must exist. Returns the
+ * live window's spread (the root mean square over bands of each band's
+ * standard deviation, in the unit of live: [dB] for the level features). */
+double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_stored *stored, long at,
+                     int lags, double *rho);
 
 /* The peak of rho[0 .. 2 lags]: its lag [ticks] from the centre, refined
  * by a parabola through the best lag and its neighbours (at most half a

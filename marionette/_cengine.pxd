@@ -97,6 +97,8 @@ cdef extern from "mar_engine.h" nogil:
         int follow
         mar_follow_options follow_opt
         double follow_cue
+        const double *follow_bands
+        size_t follow_n_bands
         int follow_on_lost
         int on_silent_node
         uint64_t max_overruns
@@ -133,6 +135,7 @@ cdef extern from "mar_engine.h" nogil:
     int mar_engine_seek(mar_engine *e, double position)
     int mar_engine_push_loudness(mar_engine *e, double value)
     int mar_engine_push_frame(mar_engine *e, double value, double onset)
+    int mar_engine_push_bands(mar_engine *e, double value, double onset, const double *bands, size_t n_bands)
     void mar_engine_set_node_alarms(mar_engine *e, uint32_t alarms, uint32_t silent)
     void mar_engine_source_lost(mar_engine *e)
     int mar_engine_request(mar_engine *e, int kind, const double *targets, int synchronized)

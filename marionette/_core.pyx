@@ -89,14 +89,16 @@ cdef class CoreEngine:
                   size_t record_slots, size_t loudness_slots, bint start_holding=False,
                   bytes follow_options=None, onsets=None, double follow_cue=NAN,
                   int follow_on_lost=ON_LOST_FLYWHEEL, int on_silent_node=MAR_FAULT_CONTINUE,
-                  uint64_t max_overruns=0):
+                  uint64_t max_overruns=0, bands=None):
         """follow_options: a filled mar_follow_options (marionette._follow.options_bytes),
         or None to let the rate drive the playback clock; onsets: the stored
         onset strength (ticks,) [dB] for the follower, or None; follow_cue:
         where the live music starts [show ticks], NaN: unknown; follow_on_lost:
         ON_LOST_FLYWHEEL or ON_LOST_HOLD, what the show does while the music is
         not followed; on_silent_node: FAULT_*, the reaction to a silent node;
-        max_overruns: real-time overruns that stop the show (0: none)."""
+        max_overruns: real-time overruns that stop the show (0: none); bands:
+        the stored band levels (ticks, n_bands) [full scale] for the
+        follower, or None."""
         axes = np.ascontiguousarray(axes, dtype=AXIS_DTYPE)
         cdef size_t n_axes = axes.shape[0]
         if show.shape[0] != n_axes or loudness.shape[0] != show.shape[1]:
@@ -106,6 +108,11 @@ cdef class CoreEngine:
             c_onsets = np.ascontiguousarray(onsets, dtype=np.float64)
             if c_onsets.shape[0] != show.shape[1]:
                 raise ArgumentError("onsets must be (ticks,)")
+        cdef cnp.ndarray[cnp.float64_t, ndim=2, mode="c"] c_bands = None
+        if bands is not None:
+            c_bands = np.ascontiguousarray(bands, dtype=np.float64)
+            if c_bands.shape[0] != show.shape[1] or c_bands.shape[1] == 0:
+                raise ArgumentError("bands must be (ticks, n_bands)")
         cdef mar_axis *c_axes = <mar_axis *>calloc(max(n_axes, 1), sizeof(mar_axis))
         if c_axes == NULL:
             raise MemoryError()
@@ -132,6 +139,8 @@ cdef class CoreEngine:
         opt.start_holding = start_holding
         opt.follow = follow_options is not None
         opt.follow_cue = follow_cue
+        opt.follow_bands = NULL if c_bands is None else &c_bands[0, 0]
+        opt.follow_n_bands = 0 if c_bands is None else c_bands.shape[1]
         opt.follow_on_lost = follow_on_lost
         opt.on_silent_node = on_silent_node
         opt.max_overruns = max_overruns
@@ -203,8 +212,13 @@ cdef class CoreEngine:
     def seek(self, double position):
         return mar_engine_seek(self.engine, position)
 
-    def push_loudness(self, double value, double onset=NAN):
-        return mar_engine_push_frame(self.engine, value, onset)
+    def push_loudness(self, double value, double onset=NAN, bands=None):
+        if bands is None:
+            return mar_engine_push_frame(self.engine, value, onset)
+        cdef double[::1] b = np.ascontiguousarray(bands, dtype=np.float64)
+        if b.shape[0] == 0:
+            return mar_engine_push_frame(self.engine, value, onset)
+        return mar_engine_push_bands(self.engine, value, onset, &b[0], b.shape[0])
 
     def set_node_alarms(self, uint32_t alarms, uint32_t silent=0):
         """alarms: nodes silent or faulted (bit i: the i-th node); silent: those silent."""

@@ -69,9 +69,21 @@ cdef extern from "mar_follow.h" nogil:
         uint64_t search_steps
     ctypedef struct mar_follow:
         pass
+    enum:
+        MAR_FOLLOW_MAX_BANDS
     ctypedef struct mar_follow_frame:
         double loudness
         double onset
+        size_t n_bands
+        double bands[MAR_FOLLOW_MAX_BANDS]
+    ctypedef struct mar_follow_music:
+        const double *loudness
+        const double *onset
+        const double *bands
+        size_t n_bands
+        size_t n
+    mar_follow *mar_follow_create_music(const mar_follow_options *opt, const mar_follow_music *music,
+                                        int *status)
     size_t mar_follow_tick(mar_follow *f, const mar_follow_frame *frames, size_t n, int64_t elapsed,
                            mar_follow_out *out)
     void mar_follow_default_options(mar_follow_options *opt)
@@ -89,6 +101,7 @@ cdef extern from "mar_follow.h" nogil:
     size_t mar_follow_stored_length(const mar_follow *f)
 
 
+MAX_BANDS = MAR_FOLLOW_MAX_BANDS     # band levels per frame, at most
 MODES = {"smooth": MAR_FOLLOW_SMOOTH, "paper": MAR_FOLLOW_PAPER}
 STATES = ("searching", "locked", "holding", "paused", "waiting")    # index = state code
 SEARCHING, LOCKED, HOLDING, PAUSED, WAITING = (MAR_FOLLOW_SEARCHING, MAR_FOLLOW_LOCKED,
@@ -165,17 +178,19 @@ cdef int _set_options(mar_follow_options *o, dict options) except -1:
 cdef class Follower:
     """The C follower over a stored loudness array (linear, one value per tick).
 
-    ``Follower(stored, options, onset=None)``: options is a dict of
-    mar_follow_options fields (see default_options); onset the stored onset
-    strength [dB] (mar_follow_create_onsets) or None; raises KeyError for an
-    unknown name and ValueError(status) when C refuses the options or the
-    stored values.
+    ``Follower(stored, options, onset=None, bands=None)``: options is a dict
+    of mar_follow_options fields (see default_options); onset the stored
+    onset strength [dB] or None; bands the stored band levels (ticks,
+    n_bands) [full scale] or None (mar_follow_create_music); raises KeyError
+    for an unknown name and ValueError(status) when C refuses the options or
+    the stored values.
     """
 
     cdef mar_follow *f
     cdef readonly dict options
+    cdef readonly size_t n_bands
 
-    def __cinit__(self, stored, dict options=None, onset=None):
+    def __cinit__(self, stored, dict options=None, onset=None, bands=None):
         cdef mar_follow_options o
         cdef int status = 0
         mar_follow_default_options(&o)
@@ -185,16 +200,28 @@ cdef class Follower:
         cdef size_t n = s.shape[0]
         if n == 0:
             raise ArgumentError(-22)
+        cdef mar_follow_music music
+        music.loudness = &s[0]
+        music.onset = NULL
+        music.bands = NULL
+        music.n_bands = 0
+        music.n = n
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] on
+        cdef cnp.ndarray[cnp.float64_t, ndim=2, mode="c"] bd
         if onset is not None:
             on = np.ascontiguousarray(onset, dtype=np.float64)
             if on.shape[0] != n:
                 raise ArgumentError(-22)
-            with nogil:
-                self.f = mar_follow_create_onsets(&o, &s[0], &on[0], n, &status)
-        else:
-            with nogil:
-                self.f = mar_follow_create(&o, &s[0], n, &status)
+            music.onset = &on[0]
+        if bands is not None:
+            bd = np.ascontiguousarray(bands, dtype=np.float64)
+            if bd.ndim != 2 or bd.shape[0] != n or bd.shape[1] == 0:
+                raise ArgumentError(-22)
+            music.bands = &bd[0, 0]
+            music.n_bands = bd.shape[1]
+        with nogil:
+            self.f = mar_follow_create_music(&o, &music, &status)
+        self.n_bands = music.n_bands
         if self.f == NULL:
             raise ArgumentError(status)
 
@@ -203,28 +230,45 @@ cdef class Follower:
             mar_follow_destroy(self.f)
             self.f = NULL
 
-    def step(self, double live, double onset=NAN):
+    def step(self, double live, double onset=NAN, bands=None):
         """One tick of the show's clock (mar_follow_tick) with one live frame,
-        or none when live is NaN: (position [stored ticks], rate [stored ticks
-        per tick], confidence [0..1], state code, flags)."""
+        or none when live is NaN, and its band levels (n_bands,) [full scale]
+        or None: (position [stored ticks], rate [stored ticks per tick],
+        confidence [0..1], state code, flags)."""
         cdef mar_follow_out out
         cdef mar_follow_frame frame
         frame.loudness = live
         frame.onset = onset
+        frame.n_bands = 0
+        if bands is not None:
+            if len(bands) > MAR_FOLLOW_MAX_BANDS:
+                raise ArgumentError(-22)
+            frame.n_bands = len(bands)
+            for i, v in enumerate(bands):
+                frame.bands[i] = v
         mar_follow_tick(self.f, &frame, 0 if live != live else 1, 1, &out)
         return out.position, out.rate, out.confidence, out.state, out.flags
 
-    def run(self, live, onset=None, bint timing=False):
+    def run(self, live, onset=None, bands=None, bint timing=False):
         """One tick per entry of ``live`` (NaN: no frame that tick) through
-        mar_follow_tick, as the engine drives it, without the GIL. Returns a dict of arrays: position, rate,
-        confidence, state (int8), flags (uint32), and with timing also ns
-        (int64: wall time of each step [ns], CLOCK_MONOTONIC around it)."""
+        mar_follow_tick, as the engine drives it, without the GIL; onset
+        (n,) [dB] and bands (n, n_bands) [full scale] the frames' own, or
+        None. Returns a dict of arrays: position, rate, confidence, state
+        (int8), flags (uint32), and with timing also ns (int64: wall time of
+        each step [ns], CLOCK_MONOTONIC around it)."""
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] x = np.ascontiguousarray(live, dtype=np.float64)
         cdef Py_ssize_t n = x.shape[0], i
+        cdef size_t b, nb = 0
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] ov = (
             np.full(n, np.nan) if onset is None else np.ascontiguousarray(onset, dtype=np.float64))
         if ov.shape[0] != n:
             raise ArgumentError(-22)
+        cdef cnp.ndarray[cnp.float64_t, ndim=2, mode="c"] bv = np.zeros((n, 1))
+        if bands is not None:
+            bv = np.ascontiguousarray(bands, dtype=np.float64)
+            if bv.ndim != 2 or bv.shape[0] != n or bv.shape[1] > MAR_FOLLOW_MAX_BANDS:
+                raise ArgumentError(-22)
+            nb = bv.shape[1]
         position = np.empty(n)
         rate = np.empty(n)
         confidence = np.empty(n)
@@ -244,6 +288,9 @@ cdef class Follower:
                     clock_gettime(CLOCK_MONOTONIC, &t0)
                 frame.loudness = x[i]
                 frame.onset = ov[i]
+                frame.n_bands = nb
+                for b in range(nb):
+                    frame.bands[b] = bv[i, b]
                 mar_follow_tick(self.f, &frame, 0 if x[i] != x[i] else 1, 1, &out)
                 if timing:
                     clock_gettime(CLOCK_MONOTONIC, &t1)

@@ -25,8 +25,8 @@ import numpy as np
 from marionette import _core
 from marionette.config import FigureConfig
 from marionette.errors import ArgumentError, EngineError
-from marionette.music.follower import (DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
-                                       engine_options as follower_options)
+from marionette.music.follower import (DEFAULT_START, MAX_BANDS, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
+                                       engine_options as follower_options, stored_bands)
 from marionette.music.node_source import NodeLoudness
 from marionette.recorder import FlightRecorder
 from marionette.show import Show, fit_to_figure
@@ -165,7 +165,9 @@ class Engine:
             RECORD_SLOTS if record else 0, LOUDNESS_SLOTS, start_pose is not None,
             None if follow is None else follower_options(config, self.show, follow),
             self.show.onsets if follow is not None else None, cue, ON_LOST[on_lost],
-            SILENT_NODE[config.faults.silent_node], config.faults.overruns)
+            SILENT_NODE[config.faults.silent_node], config.faults.overruns,
+            None if follow is None or self.show.bands is None
+            else stored_bands(self.show.bands, self.show.n_ticks, f"{self.show.path}: bands"))
         self._request_lock = threading.Lock()
         self.recorder = None
         if record:
@@ -472,15 +474,18 @@ class Engine:
             self.source_lost_reason = str(reason)
         self._core.source_lost()
 
-    def push_loudness(self, value: float, onset: float = float("nan")) -> None:
-        """Hand the tick a live loudness frame (>= 0, finite) and its onset
-        strength [dB] (>= 0; NaN: the source has none, as a node's LOUDNESS);
-        refused frames raise. A show with stored onsets lets the follower
-        place its tracking peak on them."""
-        status = self._core.push_loudness(float(value), float(onset))
+    def push_loudness(self, value: float, onset: float = float("nan"), bands=None) -> None:
+        """Hand the tick a live loudness frame (>= 0, finite), its onset
+        strength [dB] (>= 0; NaN: the source has none, as a node's LOUDNESS)
+        and its band levels [full scale] (marionette.music.bands; None: the
+        source has none); refused frames raise. A show with stored onsets
+        lets the follower place its tracking peak on them; a show with
+        stored bands correlates the bands of frames that bring as many."""
+        status = self._core.push_loudness(float(value), float(onset), bands)
         if status == -errno.EINVAL:
-            raise ArgumentError(f"live frame {value!r} (onset {onset!r}) refused: the loudness must be "
-                                "finite and >= 0, the onset NaN or finite and >= 0")
+            raise ArgumentError(f"live frame {value!r} (onset {onset!r}, bands {bands!r}) refused: the "
+                                "loudness must be finite and >= 0, the onset NaN or finite and >= 0, "
+                                f"at most {MAX_BANDS} bands, each finite and >= 0")
         _raise_for(status, "push_loudness")
 
     def _pose(self, pose, fill) -> np.ndarray:

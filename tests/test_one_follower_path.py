@@ -8,6 +8,7 @@ from conftest import run_cli
 from marionette._core import FLAG_END
 from marionette.cli.sync_sim import simulate
 from marionette.config import load_config
+from marionette.music.bands import fit_frames, wav_bands
 from marionette.music.feature import read_wav, wav_frames, write_wav
 from marionette.recorder import read_flight_record
 from marionette.show import Show, load_show
@@ -18,13 +19,14 @@ from marionette.teach.make_sample import sample_path
 T = 0.020
 
 
-def show_for(config, wav, tmp_path):
-    """A show for the bundled figure that stores the music's loudness and onsets."""
+def show_for(config, wav, tmp_path, bands=True):
+    """A show for the bundled figure that stores the music's loudness,
+    onsets and (bands: as teach makes it; else as an older show) band levels."""
     loud, onset = wav_frames(wav, T)
     home = np.array([[a.home for a in config.axes]]).T
     show = Show(axis_names=config.axis_names, units=[a.unit for a in config.axes],
                 positions=np.repeat(home, len(loud), axis=1), loudness=loud, onsets=onset,
-                tick_period=T)
+                bands=fit_frames(wav_bands(wav, T), len(loud)) if bands else None, tick_period=T)
     path = tmp_path / "show.npz"
     show.save(path)
     return path
@@ -67,7 +69,8 @@ def test_play_and_sync_sim_agree_on_the_bundled_sample(speed, tmp_path):
     assert_same_track(show, live, tmp_path)
 
 
-def test_play_and_sync_sim_agree_on_random_decks(tmp_path):
+@pytest.mark.parametrize("bands", [True, False])
+def test_play_and_sync_sim_agree_on_random_decks(bands, tmp_path):
     config = load_config(None)
     rng = np.random.default_rng(2026)
     for case in range(4):
@@ -75,7 +78,7 @@ def test_play_and_sync_sim_agree_on_random_decks(tmp_path):
         piece = synthesize(style, seed=int(rng.integers(1, 1000)))
         taught = tmp_path / f"taught{case}.wav"
         write_wav(taught, piece.samples, int(piece.sample_rate))
-        show = show_for(config, taught, tmp_path)
+        show = show_for(config, taught, tmp_path, bands)
         deck = Deck(speed=rng.uniform(0.95, 1.05), wow=0.002, snr_db=rng.uniform(15, 30),
                     start=rng.uniform(0, 30), pauses=((rng.uniform(5, 10), rng.uniform(1, 3)),),
                     seconds=20.0, sample_rate=11025, seed=case)

@@ -106,7 +106,7 @@ static void test_bad_inputs(void)
     mar_axis axis = { .limits = { -1, 1, 1, 5 }, .start = 0, .address = { 1, 0, 100, 0 } };
     double show[4] = { 0, 0.1, 0.2, 0.3 }, loud[4] = { 0, 0, 0, 0 };
     mar_engine_options opt = { .period = 0.02, .lead_mode = MAR_LEAD_DEAD_TIME_LAG,
-                               .interp = MAR_INTERP_CUBIC, .record_slots = 8, .loudness_slots = 4 };
+                               .interp = MAR_INTERP_CUBIC, .record_slots = 8, .loudness_slots = 8 };
     int status;
     mar_engine *e = mar_engine_create(&opt, &axis, 1, show, 4, loud, NULL, &status);
     CHECK(e != NULL, "create");
@@ -117,6 +117,13 @@ static void test_bad_inputs(void)
     CHECK(mar_engine_push_frame(e, 0.4, -1.0) < 0, "negative onset accepted");
     CHECK(mar_engine_push_frame(e, 0.4, INFINITY) < 0, "infinite onset accepted");
     CHECK(mar_engine_push_frame(e, 0.4, 2.0) == 0, "good frame refused");
+    double bands[MAR_FOLLOW_MAX_BANDS + 1] = {0.1, 0.2, -0.3};
+    CHECK(mar_engine_push_bands(e, 0.4, NAN, bands, 3) < 0, "negative band accepted");
+    bands[2] = NAN;
+    CHECK(mar_engine_push_bands(e, 0.4, NAN, bands, 3) < 0, "NaN band accepted");
+    bands[2] = 0.3;
+    CHECK(mar_engine_push_bands(e, 0.4, NAN, bands, MAR_FOLLOW_MAX_BANDS + 1) < 0, "too many bands accepted");
+    CHECK(mar_engine_push_bands(e, 0.4, NAN, bands, 3) == 0, "good bands refused");
     CHECK(mar_engine_push_loudness(e, 0.5) == 0, "good loudness refused");
     mar_engine_step(e, 1);
     mar_record r;
@@ -128,7 +135,7 @@ static void test_bad_inputs(void)
     CHECK(isnan(r.live_loudness), "live loudness %g on a tick without a frame", r.live_loudness);
     mar_counters cnt;
     mar_engine_counters(e, &cnt);
-    CHECK(cnt.bad_input == 6, "bad inputs counted %llu", (unsigned long long)cnt.bad_input);
+    CHECK(cnt.bad_input == 9, "bad inputs counted %llu", (unsigned long long)cnt.bad_input);
     mar_engine_destroy(e);
 
     /* refused configurations */

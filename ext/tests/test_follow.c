@@ -216,47 +216,64 @@ static double gauss(void)
     return sqrt(-2.0 * log(u)) * cos(6.283185307179586 * v);
 }
 
-/* mar_corr_lags against Pearson's formula computed directly (two passes,
- * both means removed), on random windows and lags; a scaled and shifted
- * copy of the stored music correlates 1 at its own lag. */
+/* mar_corr_lags against the joint correlation computed directly (two
+ * passes, each band's means removed, one correlation over every band and
+ * frame; with one band Pearson's formula), on random windows, lags and
+ * band counts; a copy of the stored music, scaled and with a shift per
+ * band (a volume knob, a colouring), correlates 1 at its own lag. */
 static void test_corr_lags(int cases)
 {
-    enum { CAP = 400, MAXL = 12 };
-    static double stored[CAP + 2 * MAXL + 8], q1[CAP + 2 * MAXL + 9], q2[CAP + 2 * MAXL + 9], live[CAP];
+    enum { CAP = 400, MAXL = 12, STRIDE = CAP + 2 * MAXL + 8, NB = MAR_CORR_MAX_BANDS };
+    static double stored[NB * STRIDE], q1[NB * (STRIDE + 1)], q2[NB * (STRIDE + 1)], live[NB * CAP];
     double rho[2 * MAXL + 1];
     for (int c = 0; c < cases; c++) {
         size_t len = (size_t)uniform(4.0, (double)CAP);
         int lags = (int)uniform(0.0, (double)MAXL + 1.0);
+        size_t nb = c % 2 ? 1 : (size_t)uniform(1.0, (double)NB + 1.0);
         size_t n = len + 2 * (size_t)lags + 8;
-        for (size_t i = 0; i < n; i++)
-            stored[i] = uniform(-40.0, 0.0);
-        q1[0] = q2[0] = 0.0;
-        for (size_t i = 0; i < n; i++)
-            q1[i + 1] = q1[i] + stored[i], q2[i + 1] = q2[i] + stored[i] * stored[i];
+        const mar_corr_stored st = {stored, q1, q2, STRIDE, nb};
+        for (size_t b = 0; b < nb; b++) {
+            double *v = stored + b * STRIDE, *s1 = q1 + b * (STRIDE + 1), *s2 = q2 + b * (STRIDE + 1);
+            for (size_t i = 0; i < n; i++)
+                v[i] = uniform(-40.0, 0.0);
+            s1[0] = s2[0] = 0.0;
+            for (size_t i = 0; i < n; i++)
+                s1[i + 1] = s1[i] + v[i], s2[i + 1] = s2[i] + v[i] * v[i];
+        }
         long at = lags + (long)uniform(0.0, 8.0);
         int d0 = lags ? (int)uniform(-(double)lags, (double)lags + 1.0) : 0;
         int copy = c % 3 == 0;                      /* every third: a copy of the stored music at lag d0 */
-        double gain = uniform(0.5, 2.0), shift = uniform(-10.0, 10.0);
-        for (size_t k = 0; k < len; k++)
-            live[k] = copy ? gain * stored[(size_t)(at + d0) + k] + shift : uniform(-40.0, 0.0);
-        double spread = mar_corr_lags(live, len, stored, q1, q2, at, lags, rho);
-        double lm = 0.0, ll = 0.0;
-        for (size_t k = 0; k < len; k++)
-            lm += live[k];
-        lm /= (double)len;
-        for (size_t k = 0; k < len; k++)
-            ll += (live[k] - lm) * (live[k] - lm);
-        CHECK(fabs(spread - sqrt(ll / (double)len)) < 1e-9, "case %d: spread %g", c, spread);
+        double gain = uniform(0.5, 2.0);
+        for (size_t b = 0; b < nb; b++) {
+            double shift = uniform(-10.0, 10.0);
+            for (size_t k = 0; k < len; k++)
+                live[b * CAP + k] = copy ? gain * stored[b * STRIDE + (size_t)(at + d0) + k] + shift
+                                         : uniform(-40.0, 0.0);
+        }
+        double spread = mar_corr_lags(live, CAP, len, &st, at, lags, rho);
+        double lm[NB], ll = 0.0;
+        for (size_t b = 0; b < nb; b++) {
+            lm[b] = 0.0;
+            for (size_t k = 0; k < len; k++)
+                lm[b] += live[b * CAP + k];
+            lm[b] /= (double)len;
+            for (size_t k = 0; k < len; k++)
+                ll += (live[b * CAP + k] - lm[b]) * (live[b * CAP + k] - lm[b]);
+        }
+        CHECK(fabs(spread - sqrt(ll / (double)(len * nb))) < 1e-9, "case %d: spread %g", c, spread);
         for (int d = -lags; d <= lags; d++) {
-            const double *st = stored + at + d;
-            double sm = 0.0, cov = 0.0, ss = 0.0;
-            for (size_t k = 0; k < len; k++)
-                sm += st[k];
-            sm /= (double)len;
-            for (size_t k = 0; k < len; k++)
-                cov += (live[k] - lm) * (st[k] - sm), ss += (st[k] - sm) * (st[k] - sm);
+            double cov = 0.0, ss = 0.0;
+            for (size_t b = 0; b < nb; b++) {
+                const double *sv = stored + b * STRIDE + at + d, *l = live + b * CAP;
+                double sm = 0.0;
+                for (size_t k = 0; k < len; k++)
+                    sm += sv[k];
+                sm /= (double)len;
+                for (size_t k = 0; k < len; k++)
+                    cov += (l[k] - lm[b]) * (sv[k] - sm), ss += (sv[k] - sm) * (sv[k] - sm);
+            }
             double want = cov / sqrt(ll * ss);
-            CHECK(fabs(rho[d + lags] - want) < 1e-9, "case %d lag %d: rho %.12f, Pearson %.12f",
+            CHECK(fabs(rho[d + lags] - want) < 1e-9, "case %d lag %d: rho %.12f, directly %.12f",
                   c, d, rho[d + lags], want);
         }
         if (copy)
@@ -264,41 +281,54 @@ static void test_corr_lags(int cases)
                   c, rho[d0 + lags]);
     }
     /* a flat window correlates 0, not NaN */
+    const mar_corr_stored one = {stored, q1, q2, STRIDE, 1};
     for (size_t k = 0; k < 50; k++)
         live[k] = -20.0;
-    mar_corr_lags(live, 50, stored, q1, q2, 5, 3, rho);
+    mar_corr_lags(live, CAP, 50, &one, 5, 3, rho);
     for (int i = 0; i < 7; i++)
         CHECK(rho[i] == 0.0, "flat live window: rho[%d] = %g", i, rho[i]);
 }
 
 /* Correlation along a line: live frames are smooth stored music played at
- * rate r from p0 (one in 20 missing); resampled along a line d ticks
+ * rate r from p0 (one in 20 missing), in 1 to 4 bands with an offset
+ * each; resampled along a line d ticks
  * behind the true one, they correlate with the stored music at lag d
- * within 0.2 tick, above 0.8 (missing frames and two linear
- * interpolations of 8-tick waves cost the rest). */
+ * within 0.2 tick in 98 % of cases and 0.4 in all, above 0.8 (missing
+ * frames and two linear interpolations of 8-tick waves cost the rest; a
+ * parabola through three points of a peak that is not one is off by up
+ * to 0.33 tick: the worst of 2000 cases with 10 seeds, 12 of them over 0.2). */
 static void test_corr_along_a_line(int cases)
 {
-    enum { N = 4000, CAP = 1024, LAGS = 6 };
-    static double stored[N], q1[N + 1], q2[N + 1], ring[CAP], out[CAP];
+    enum { N = 4000, CAP = 1024, LAGS = 6, NB = 4 };
+    static double stored[NB * N], q1[NB * (N + 1)], q2[NB * (N + 1)], ring[CAP * NB], out[NB * CAP];
     double rho[2 * LAGS + 1];
+    int loose = 0;                                              /* cases 0.2 tick or more off */
     for (int c = 0; c < cases; c++) {
-        double ph[3] = {uniform(0, 6.3), uniform(0, 6.3), uniform(0, 6.3)};
-        double per[3] = {uniform(8, 20), uniform(20, 45), uniform(45, 120)};      /* [ticks] */
-        for (size_t j = 0; j < N; j++)
-            stored[j] = -20.0 + 6.0 * sin(6.283185307179586 * (double)j / per[0] + ph[0])
-                        + 4.0 * sin(6.283185307179586 * (double)j / per[1] + ph[1])
-                        + 3.0 * sin(6.283185307179586 * (double)j / per[2] + ph[2]);
-        q1[0] = q2[0] = 0.0;
-        for (size_t j = 0; j < N; j++)
-            q1[j + 1] = q1[j] + stored[j], q2[j + 1] = q2[j] + stored[j] * stored[j];
+        size_t nb = 1 + (size_t)c % NB;                         /* bands: each its own waves */
+        for (size_t b = 0; b < nb; b++) {
+            double ph[3] = {uniform(0, 6.3), uniform(0, 6.3), uniform(0, 6.3)};
+            double per[3] = {uniform(8, 20), uniform(20, 45), uniform(45, 120)};      /* [ticks] */
+            double *v = stored + b * N, *s1 = q1 + b * (N + 1), *s2 = q2 + b * (N + 1);
+            for (size_t j = 0; j < N; j++)
+                v[j] = -20.0 + 6.0 * sin(6.283185307179586 * (double)j / per[0] + ph[0])
+                       + 4.0 * sin(6.283185307179586 * (double)j / per[1] + ph[1])
+                       + 3.0 * sin(6.283185307179586 * (double)j / per[2] + ph[2]);
+            s1[0] = s2[0] = 0.0;
+            for (size_t j = 0; j < N; j++)
+                s1[j + 1] = s1[j] + v[j], s2[j + 1] = s2[j] + v[j] * v[j];
+        }
         double r = uniform(0.9, 1.1), p0 = uniform(100.0, 1500.0);
         uint64_t t = (uint64_t)uniform(CAP, 2000.0);                               /* newest step */
-        for (uint64_t k = t + 1 - CAP; k <= t; k++)
-            ring[k & (CAP - 1)] = uniform(0.0, 1.0) < 0.05 ? NAN : live_at(stored, N, p0, r, (size_t)k);
+        for (uint64_t k = t + 1 - CAP; k <= t; k++) {
+            int missing = uniform(0.0, 1.0) < 0.05;
+            for (size_t b = 0; b < nb; b++)             /* a knob and a colouring: an offset per band */
+                ring[(k & (CAP - 1)) * nb + b] = missing ? NAN : live_at(stored + b * N, N, p0, r, (size_t)k)
+                                                                 + 3.0 * (double)b - 7.0;
+        }
         double p = p0 + r * (double)(t + 1);                  /* where the music is now [stored ticks] */
         size_t ages = (size_t)uniform(100.0, 900.0);
         double behind = uniform(-2.5, 2.5);                    /* the line's error [ticks] */
-        const mar_corr_history live = {ring, CAP - 1, t};
+        const mar_corr_history live = {ring, CAP - 1, t, nb};
         long j0;
         double center;
         size_t m = mar_corr_resample(&live, ages, p - behind, r, LAGS, N - LAGS - 1, CAP, out, &j0, &center);
@@ -307,15 +337,25 @@ static void test_corr_along_a_line(int cases)
               c, center, ages);
         if (!m)
             continue;
-        mar_corr_lags(out, m, stored, q1, q2, j0, LAGS, rho);
+        for (size_t b = 0; b < nb; b++) {                       /* each band's mean taken out */
+            double mean = 0.0;
+            for (size_t k = 0; k < m; k++)
+                mean += out[b * CAP + k];
+            CHECK(fabs(mean) < 1e-6 * (double)m, "case %d band %zu: mean %g left", c, b, mean / (double)m);
+        }
+        const mar_corr_stored st = {stored, q1, q2, N, nb};
+        mar_corr_lags(out, CAP, m, &st, j0, LAGS, rho);
         double height, kappa;
         int edge;
         double lag = mar_corr_peak(rho, LAGS, &height, &kappa, &edge);
-        CHECK(!edge && fabs(lag - behind) < 0.2 && height > 0.8,
-              "case %d: line %.2f ticks behind, peak at %.3f (height %.3f)", c, behind, lag, height);
+        CHECK(!edge && fabs(lag - behind) < 0.4 && height > 0.8,
+              "case %d (%zu bands): line %.2f ticks behind, peak at %.3f (height %.3f)", c, nb, behind, lag,
+              height);
+        loose += fabs(lag - behind) >= 0.2;
     }
+    CHECK(loose <= cases / 50, "%d of %d lags 0.2 tick or more off", loose, cases);
     /* too few frames, a standing line, or a line out of the piece: nothing */
-    const mar_corr_history live = {ring, CAP - 1, 2000};
+    const mar_corr_history live = {ring, CAP - 1, 2000, 1};
     long j0;
     double center;
     CHECK(mar_corr_resample(&live, 1, 500.0, 1.0, 0, N, CAP, out, &j0, &center) == 0, "one frame resampled");

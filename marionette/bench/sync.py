@@ -103,6 +103,7 @@ import numpy as np
 from marionette.bench import STRICT_HELP, exit_status, recordings, verdict
 from marionette.bench._machine import describe, machine_info
 from marionette.cli.options import SEED as SEED_OPTION, Number
+from marionette.music.bands import bands, fit_frames
 from marionette.music.feature import FRAME_PERIOD, loudness, onsets
 from marionette.music.follower import STATES, Follower, sync_ticks
 from marionette.sim.music import synthesize
@@ -343,9 +344,12 @@ def check_targets(result: dict, targets=TARGETS) -> list[tuple[str, float, bool]
 
 
 def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED, progress=None,
-            seeds: int = SEEDS, real: list | tuple = (), real_note: str = "") -> list[dict]:
+            seeds: int = SEEDS, real: list | tuple = (), real_note: str = "",
+            use_bands: bool = True) -> list[dict]:
     """One result per mode (smooth, paper) with the documented keys, over
-    the scenarios of seeds seed, seed + 1, ... (seeds of them), then one
+    the scenarios of seeds seed, seed + 1, ... (seeds of them), the
+    follower on the band levels (use_bands, as a show made by teach) or on
+    the loudness alone (an older show, or a one-band node), then one
     per set of the cue's runs (smooth mode): "cue at top", "top, unknown",
     "wrong cue", "wrong cue, unknown". Each result says its "start"
     ("unknown" for the first two). real: recordings.Recording, played as
@@ -360,6 +364,8 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
         pieces = {k: replace(p, samples=p.samples[:int(40 * p.sample_rate)]) for k, p in pieces.items()}
     stored = {k: loudness(p.samples, p.sample_rate) for k, p in pieces.items()}
     stored_onsets = {k: onsets(p.samples, p.sample_rate) for k, p in pieces.items()}
+    stored_bands = {k: fit_frames(bands(p.samples, p.sample_rate), len(stored[k])) if use_bands else None
+                    for k, p in pieces.items()}
     audible_s = {k: audible_from(v) for k, v in stored.items()}             # [s]
     durations = {k: p.duration for k, p in pieces.items() if not k.startswith("real/")}
     real_durations = {k: p.duration for k, p in pieces.items() if k.startswith("real/")}
@@ -379,13 +385,18 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
         played = play(pieces[sc.piece].samples, pieces[sc.piece].sample_rate, sc.deck)
         live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
         live_onsets = sync_ticks(onsets(played.samples, played.sample_rate))[:len(played.truth)]
-        return played, live, live_onsets
+        live_bands = None
+        if use_bands:
+            live_bands = sync_ticks(fit_frames(bands(played.samples, played.sample_rate), len(live) - 1))
+        return played, (live, live_onsets, live_bands)
 
-    def follow(sc, live, live_onsets, mode="smooth", cue=None):
-        follower = Follower(stored[sc.piece], mode=mode, onset=stored_onsets[sc.piece])
+    def follow(sc, live, mode="smooth", cue=None):
+        follower = Follower(stored[sc.piece], mode=mode, onset=stored_onsets[sc.piece],
+                            bands=stored_bands[sc.piece])
         if cue is not None:
             follower.cue(cue)                                          # [stored ticks]
-        return follower.run(live, live_onsets, timing=True)
+        loud, live_onsets, live_bands = live
+        return follower.run(loud, live_onsets, timing=True, bands=live_bands)
 
     def row(m, sc, played):
         m.update(name=sc.name, piece=sc.piece, target=sc.target, real=sc.real, speed=sc.deck.speed,
@@ -403,19 +414,19 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
         ("smooth", "wrong cue"), ("smooth", "wrong cue, unknown"))}
     for sc in runs:
         t0 = time.perf_counter()
-        played, live, live_onsets = live_of(sc)
+        played, live = live_of(sc)
         for mode in ("smooth", "paper"):
-            track = follow(sc, live, live_onsets, mode)
+            track = follow(sc, live, mode)
             per_set[mode, "unknown"].append(row(measure(track, played, track.ns), sc, played))
         if progress:
             progress(f"{sc.name}: {len(played.truth) * T:.0f} s of live audio, "
                      f"{time.perf_counter() - t0:.1f} s")
     for sc in top_variants(runs):
         t0 = time.perf_counter()
-        played, live, live_onsets = live_of(sc)
+        played, live = live_of(sc)
         onset = onset_of(played, audible_s[sc.piece])                   # [s]
         for start, cue in (("cue at top", 0.0), ("top, unknown", None)):
-            track = follow(sc, live, live_onsets, cue=cue)
+            track = follow(sc, live, cue=cue)
             m = measure(track, played, None, from_s=onset + CUE_FROM_S, onset_s=onset)
             per_set["smooth", start].append(row(every_tick(m, track, played), sc, played))
         if progress:
@@ -423,10 +434,10 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
                      f"audio, {time.perf_counter() - t0:.1f} s")
     for sc in wrong:
         t0 = time.perf_counter()
-        played, live, live_onsets = live_of(sc)
-        track = follow(sc, live, live_onsets, cue=0.0)
+        played, live = live_of(sc)
+        track = follow(sc, live, cue=0.0)
         cued = every_tick(measure(track, played), track, played)
-        track = follow(sc, live, live_onsets)
+        track = follow(sc, live)
         unknown = every_tick(measure(track, played), track, played)
         cued["later_s"] = wrong_cue_later(cued, unknown)
         per_set["smooth", "wrong cue"].append(row(cued, sc, played))
@@ -670,6 +681,9 @@ def register(sub) -> None:
     parser.add_argument("--seeds", type=Number(int, 1), default=SEEDS, metavar="N",
                         help=f"sets of scenarios, seeds SEED to SEED + N - 1 (default {SEEDS}): "
                              "tuning to one set does not pass")
+    parser.add_argument("--loudness-only", action="store_true",
+                        help="follow on the loudness alone, as an older show without band levels "
+                             "(default: the band levels, as a show made by teach)")
     parser.add_argument("--music-dir", action="append", metavar="DIR",
                         help=f"real recordings (.ogg/.wav/.flac) from DIR, repeatable (default: "
                              f"${recordings.ENV}, else {', '.join(recordings.DEFAULT_DIRS)})")
@@ -680,7 +694,8 @@ def run(args) -> int:
     real, note = recordings.load(args.music_dir, count=1 if args.quick else recordings.COUNT)
     if progress:
         progress(f"real recordings: {', '.join(r.name for r in real) or 'none'}" + (f" ({note})" if note else ""))
-    results = collect(args.seconds, args.quick, args.seed, progress, 1 if args.quick else args.seeds, real, note)
+    results = collect(args.seconds, args.quick, args.seed, progress, 1 if args.quick else args.seeds, real, note,
+                      use_bands=not args.loudness_only)
     if args.json:
         json.dump(results, sys.stdout, indent=2, default=float)
         sys.stdout.write("\n")

@@ -81,25 +81,26 @@ def register(sub) -> None:
     p.set_defaults(run=run)
 
 
-def _recording_source(args, config):
+def _recording_source(args, config, show):
     """The live music from --music (a recording played back as if live), or
-    None; its sink is the engine, set once there is one."""
+    None; its sink is the engine, set once there is one. Band levels are
+    measured when the show has them to follow."""
     if not args.music:
         return None
     from marionette.music.wav_source import WavSource
-    return WavSource(args.music, period=config.tick_period)
+    return WavSource(args.music, period=config.tick_period, bands=show.bands is not None)
 
 
-def _open_audio(args, engine_box: list):
+def _open_audio(args, engine_box: list, bands: bool):
     """The sound card source, started before the engine so that its input
     latency is known when the engine is made; frames go to the engine in
     engine_box once there is one (until then they are dropped)."""
     from marionette.music.sound_card import SoundCard
     audio = None
 
-    def to_engine(value: float, onset: float) -> None:
+    def to_engine(value: float, onset: float, rows=None) -> None:
         if engine_box:
-            engine_box[0].push_loudness(value, onset)
+            engine_box[0].push_loudness(value, onset, rows)
 
     def audio_lost(reason: str) -> None:      # at once, from the source's watchdog
         print(f"audio input {audio.name!r} lost: {reason}", file=sys.stderr, flush=True)
@@ -107,7 +108,8 @@ def _open_audio(args, engine_box: list):
             engine_box[0].source_lost(reason)
 
     # the index comes as a string: the source takes digits as an index
-    audio = SoundCard(to_engine, device=args.audio_device or None, onsets=True, on_lost=audio_lost)
+    audio = SoundCard(to_engine, device=args.audio_device or None, onsets=True, on_lost=audio_lost,
+                      bands=bands)
     return audio.start()
 
 
@@ -117,7 +119,7 @@ def run(args) -> int:
     output = None
     if args.output and args.link:
         raise MarionetteError("give --output or --link, not both")
-    live = _recording_source(args, config)
+    live = _recording_source(args, config, show)
     follow = args.follow or (True if (live is not None or args.audio_device is not None) else None)
     # without --ticks, a show that follows music, or plays in real time, runs to its
     # end (FLAG_END): slow music, the operator's pauses (space) and --rate < 1 move the
@@ -148,7 +150,7 @@ def run(args) -> int:
     on_lost = config.follow.on_lost
     try:
         if args.audio_device is not None:
-            audio = _open_audio(args, engine_box)
+            audio = _open_audio(args, engine_box, show.bands is not None)
         latency, latency_from = choose_latency(config.follow.latency,
                                                audio.latency if audio is not None else None)
         config = replace(config, follow=replace(config.follow, latency=latency))

@@ -4,12 +4,13 @@
                         [--mode smooth|paper] [--truth TRUTH.csv] [--config FIGURE.toml]
                         [--loudness-only]
 
-The taught recording (or a show file, whose stored loudness and onsets the
-engine follows) gives the stored loudness and onset strength (one frame
-each per tick, marionette/music/feature.py), the live recording the live
-frames (--loudness-only: the live loudness alone, as servo nodes measure
-it; the tracker then works without onsets, as the engine does on node
-LOUDNESS frames); the C follower runs its tick (mar_follow_tick, the same
+The taught recording (or a show file, whose stored loudness, onsets and
+band levels the engine follows) gives the stored loudness, onset strength
+and band levels (one frame each per tick, marionette/music/feature.py and
+bands.py; a show without bands: none), the live recording the live frames
+(--loudness-only: the live loudness alone, as one-band servo nodes measure
+it; the tracker then works without onsets and bands, as the engine does
+on such nodes' LOUDNESS frames); the C follower runs its tick (mar_follow_tick, the same
 code the engine runs in its tick) once per tick: tick k has heard the live
 audio up to k * T, so it gets live frame k - 1 (tick 0 gets none), and
 `marionette play --music` feeds the engine the same way, so the two give
@@ -36,6 +37,7 @@ import numpy as np
 from marionette.cli.options import input_file, output_file
 from marionette.config import FOLLOW_MODES, load_config
 from marionette.errors import MarionetteError
+from marionette.music.bands import fit_frames, wav_bands
 from marionette.music.feature import wav_frames, wav_loudness
 from marionette.music.follower import DEFAULT_START, STATES, Follower, cue_ticks, sync_ticks
 from marionette.show import load_show
@@ -92,15 +94,16 @@ def accuracy(errors_s: np.ndarray) -> dict:
 
 
 def taught_frames(taught, period: float):
-    """The stored loudness and onsets [dB] (None when not stored) the
-    follower compares with: from a show file (.npz, .csv: what the engine
-    follows at the show) or from the taught recording (WAV)."""
+    """The stored loudness, onsets [dB] and band levels (each None when not
+    stored) the follower compares with: from a show file (.npz, .csv: what
+    the engine follows at the show) or from the taught recording (WAV)."""
     if Path(taught).suffix in (".npz", ".csv"):
         show = load_show(taught)
         if abs(show.tick_period - period) > 1e-12:
             raise SyncSimError(f"{taught}: tick period {show.tick_period} s, the figure's is {period} s")
-        return show.loudness, show.onsets
-    return wav_frames(taught, period)
+        return show.loudness, show.onsets, show.bands
+    loud, onsets = wav_frames(taught, period)
+    return loud, onsets, fit_frames(wav_bands(taught, period), len(loud))
 
 
 def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool = True,
@@ -111,18 +114,21 @@ def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool 
     Engine(follow_start=...)), None: unknown."""
     period = config.tick_period if config is not None else 0.020
     settings = config.follow if config is not None else None
-    stored, stored_onsets = taught_frames(taught, period)
+    stored, stored_onsets, stored_bands = taught_frames(taught, period)
+    live_bands = None
     if live_onsets:
         frames, onsets = wav_frames(live, period)
-    else:                       # as a node measures it: no onset is computed
+        if stored_bands is not None:
+            live_bands = sync_ticks(fit_frames(wav_bands(live, period), len(frames)))
+    else:                       # as a one-band node measures it: no onset, no bands
         frames = wav_loudness(live, period)
         onsets = np.full(len(frames), np.nan)
     if len(stored) < 2:
         raise SyncSimError(f"{taught}: shorter than two ticks ({len(stored)} frames)")
-    follower = Follower(stored, settings, period, onset=stored_onsets, mode=mode)
+    follower = Follower(stored, settings, period, onset=stored_onsets, bands=stored_bands, mode=mode)
     if start is not None:
         follower.cue(cue_ticks(start, len(stored), period, "--start"))
-    track = follower.run(sync_ticks(frames), sync_ticks(onsets))
+    track = follower.run(sync_ticks(frames), sync_ticks(onsets), bands=live_bands)
     return track, period, follower
 
 
@@ -213,5 +219,6 @@ def register(sub) -> None:
                    help="figure TOML for the tick period and [follow] settings")
     add_start_argument(p)
     p.add_argument("--loudness-only", action="store_true",
-                   help="live frames without onsets, as servo nodes send them (LOUDNESS)")
+                   help="live frames without onsets and bands, as one-band servo nodes send them "
+                        "(LOUDNESS)")
     p.set_defaults(run=run)

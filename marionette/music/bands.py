@@ -130,6 +130,13 @@ def wav_bands(path, period: float = FRAME_PERIOD, n_bands: int = N_BANDS) -> np.
         raise AudioError(f"{path}: {exc}") from None
 
 
+def fit_frames(rows: np.ndarray, n: int) -> np.ndarray:
+    """Band level rows cut or padded with NaN rows (no frame) to n frames:
+    the band meter's frames beside another meter's n."""
+    rows = np.asarray(rows, dtype=np.float64)[:n]
+    return np.pad(rows, ((0, n - len(rows)), (0, 0)), constant_values=np.nan)
+
+
 def window_correlation(live_db: np.ndarray, stored_db: np.ndarray) -> float:
     """The joint correlation of two equally long windows of band levels [dB]
     (frames, bands): each band's mean over the window taken out (the volume

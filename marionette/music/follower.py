@@ -25,6 +25,7 @@ from marionette.errors import MarionetteError
 STATES = _follow.STATES         # state code -> name: searching, locked, holding, paused, waiting
 FLAGS = _follow.FLAGS           # flag name -> bit
 OPTIONS = _follow.OPTIONS       # option name -> kind, default, lo, hi, unit, why (ext/mar_follow.h)
+MAX_BANDS = _follow.MAX_BANDS   # band levels per frame, at most (MAR_FOLLOW_MAX_BANDS)
 DEFAULT_START = 0.0             # where the live music starts by default [s of the show]: the top (a cue)
 
 
@@ -104,13 +105,16 @@ class Follower:
     peak on the loudness plus onset_weight times the onset, which a room's
     colouring does not shift, wherever the live frames bring onsets too
     (NaN: a frame without; the loudness alone where a window has none).
-    settings: a FollowConfig (the figure's [follow] table) or None for the
+    bands: the stored band levels (marionette.music.bands, (ticks, n_bands)
+    [full scale], >= 0) or None. With them the correlations run jointly on
+    the bands wherever the live frames bring as many (smooth mode); frames
+    without (a one-band node) are followed on the loudness. settings: a FollowConfig (the figure's [follow] table) or None for the
     defaults; period: tick period [s]; options: options by name (OPTIONS,
     in their units: times in s), which override the settings.
     """
 
     def __init__(self, stored, settings: FollowConfig | None = None, period: float = 0.020,
-                 onset=None, **options):
+                 onset=None, bands=None, **options):
         stored = np.asarray(stored, dtype=np.float64)
         if stored.ndim != 1 or len(stored) < 2:
             raise FollowError(f"stored loudness must be a 1-d array of at least 2 values, "
@@ -125,11 +129,13 @@ class Follower:
             bad = np.flatnonzero(~(np.isfinite(onset) & (onset >= 0)))
             if len(bad):
                 raise FollowError(f"stored onset[{bad[0]}] = {float(onset[bad[0]])!r} must be finite and >= 0")
+        if bands is not None:
+            bands = stored_bands(bands, len(stored))
         opt = c_options(settings, period, **options)
         problem = options_problem(opt)
         if problem:
             raise FollowError(f"follower options: {problem}")
-        self._f = _follow.Follower(stored, opt, onset)
+        self._f = _follow.Follower(stored, opt, onset, bands)
         self.period = float(period)             # [s]
         self.options = dict(self._f.options)
 
@@ -138,23 +144,35 @@ class Follower:
         """Stored frames [ticks]."""
         return self._f.stored_length
 
-    def step(self, live: float = float("nan"), onset: float = float("nan")) -> FollowOut:
+    @property
+    def n_bands(self) -> int:
+        """Stored band levels per tick (0: none)."""
+        return self._f.n_bands
+
+    def step(self, live: float = float("nan"), onset: float = float("nan"), bands=None) -> FollowOut:
         """One tick of the show's clock, as the engine runs it
         (mar_follow_tick), with the live frame that came in it (linear
-        loudness, and its onset strength [dB] when made with onsets; NaN:
-        none came)."""
-        p, r, c, s, fl = self._f.step(float(live), float(onset))
+        loudness, its onset strength [dB] when made with onsets, its band
+        levels [full scale] or None; NaN: none came)."""
+        p, r, c, s, fl = self._f.step(float(live), float(onset), bands)
         return FollowOut(position=p, rate=r, confidence=c, state=STATES[s], flags=fl)
 
-    def run(self, live, onset=None, timing: bool = False) -> Track:
+    def run(self, live, onset=None, timing: bool = False, bands=None) -> Track:
         """One tick per live frame (NaN: no frame that tick), in C without the
-        GIL; onset: the live onset strengths [dB], one per frame, when made with onsets."""
+        GIL; onset: the live onset strengths [dB], one per frame, when made
+        with onsets; bands: the live band levels (frames, n_bands) [full
+        scale] or None."""
         live = np.asarray(live, dtype=np.float64)
         if live.ndim != 1:
             raise FollowError(f"live frames must be a 1-d array, got shape {live.shape}")
         if onset is not None and np.shape(onset) != live.shape:
             raise FollowError(f"live onsets: shape {np.shape(onset)}, the live frames have {live.shape}")
-        out = self._f.run(live, onset, timing)
+        if bands is not None:
+            bands = np.asarray(bands, dtype=np.float64)
+            if bands.ndim != 2 or len(bands) != len(live) or bands.shape[1] > MAX_BANDS:
+                raise FollowError(f"live bands: shape {bands.shape}, the live frames have {live.shape} "
+                                  f"(at most {MAX_BANDS} bands)")
+        out = self._f.run(live, onset, bands, timing)
         return Track(position=out["position"], rate=out["rate"], confidence=out["confidence"],
                      state=out["state"], flags=out["flags"], ns=out.get("ns"))
 
@@ -175,12 +193,26 @@ class Follower:
         return self._f.counters()
 
 
+def stored_bands(bands, n_ticks: int, what: str = "stored bands") -> np.ndarray:
+    """Band levels (n_ticks, n_bands) [full scale] as the follower takes
+    them, else FollowError naming the first bad value."""
+    bands = np.asarray(bands, dtype=np.float64)
+    if bands.ndim != 2 or len(bands) != n_ticks or not 1 <= bands.shape[1] <= MAX_BANDS:
+        raise FollowError(f"{what}: shape {bands.shape}, expected ({n_ticks}, 1 .. {MAX_BANDS})")
+    bad = np.argwhere(~(np.isfinite(bands) & (bands >= 0)))
+    if len(bad):
+        i, b = bad[0]
+        raise FollowError(f"{what}[{i}, {b}] = {float(bands[i, b])!r} must be finite and >= 0")
+    return bands
+
+
 def sync_ticks(live_frames) -> np.ndarray:
     """Live frames laid on the tick grid the way the engine sees them: tick
     k has heard the live audio up to k * T, so it gets frame k - 1, and tick
-    0 gets none (NaN). Length len(live_frames) + 1."""
+    0 gets none (NaN). Length len(live_frames) + 1; rows of band levels
+    (frames, n_bands) get a row of NaN in front."""
     live_frames = np.asarray(live_frames, dtype=np.float64)
-    return np.concatenate([[np.nan], live_frames])
+    return np.concatenate([np.full((1,) + live_frames.shape[1:], np.nan), live_frames])
 
 
 def engine_options(config, show, mode: str | bool = True) -> bytes:

@@ -33,6 +33,7 @@ from typing import Callable
 
 import numpy as np
 
+from marionette.music.bands import BandMeter
 from marionette.music.feature import FRAME_PERIOD, AudioError, LoudnessMeter, OnsetMeter
 from marionette.music.source import LiveSource, Sink
 from marionette.music.stderr_catch import StderrCatcher
@@ -122,7 +123,9 @@ class SoundCard(LiveSource):
 
     sink(value) gets each frame (linear loudness >= 0, one per period
     [s] of audio); with onsets=True sink(value, onset), the frame's
-    onset strength [dB] beside it (``Engine.push_loudness`` takes both).
+    onset strength [dB] beside it (``Engine.push_loudness`` takes both);
+    with bands=True also the frame's band levels (marionette.music.bands),
+    sink(value, onset, bands) (onset NaN without onsets=True).
     device: index (int or digit string) or part of the name (None: the
     first input); sample_rate [Hz] (None: the device's default); channels
     to record (averaged to mono). sd: the sounddevice module to use (tests).
@@ -145,7 +148,8 @@ class SoundCard(LiveSource):
     def __init__(self, sink: Sink | None, device=None,
                  sample_rate: float | None = None, channels: int = 1,
                  period: float = FRAME_PERIOD, sd=None, onsets: bool = False,
-                 on_lost: Callable[[str], object] | None = None, catch_stderr: bool = True):
+                 on_lost: Callable[[str], object] | None = None, catch_stderr: bool = True,
+                 bands: bool = False):
         super().__init__(sink, on_lost)
         self.sd = sd or import_sounddevice()
         self.catch_stderr = catch_stderr
@@ -163,6 +167,7 @@ class SoundCard(LiveSource):
                              f"channel(s) at {self.sample_rate:g} Hz: {exc}") from None
         self.meter = LoudnessMeter(self.sample_rate, period)       # AudioError below 8 kHz
         self.onset_meter = OnsetMeter(self.sample_rate, period) if onsets else None
+        self.band_meter = BandMeter(self.sample_rate, period) if bands else None
         self.overflows = 0              # blocks flagged input overflow
         self.underflows = 0             # blocks flagged input underflow
         self.refused = 0                # frames the sink raised on
@@ -207,6 +212,7 @@ class SoundCard(LiveSource):
             with self._lock:
                 values = self.meter.feed(block)
                 onsets = None if self.onset_meter is None else self.onset_meter.feed(block)
+                rows = None if self.band_meter is None else self.band_meter.feed(block)
         except Exception as exc:        # never into PortAudio, which would print it
             self._trouble = f"a block could not be measured: {type(exc).__name__}: {exc}"
             self._wake.set()
@@ -215,7 +221,10 @@ class SoundCard(LiveSource):
             if self.sink is None:       # no sink yet: dropped
                 continue
             try:
-                if onsets is None:
+                if rows is not None:
+                    self.sink(float(v), float("nan") if onsets is None else float(onsets[i]),
+                              rows[i] if i < len(rows) else None)
+                elif onsets is None:
                     self.sink(float(v))
                 else:
                     self.sink(float(v), float(onsets[i]))

@@ -1,8 +1,9 @@
 """A recording played back as if it were the live music (``play --music``):
 a live source as marionette.music.source declares it.
 
-The frames (loudness and onset strength, marionette.music.feature) are
-measured from the whole file when the source is made. In real time,
+The frames (loudness and onset strength, marionette.music.feature, and with
+bands=True the band levels, marionette.music.bands) are measured from the
+whole file when the source is made. In real time,
 start() hands the sink one frame per period from a thread, as a sound card
 would; in step mode the caller hands them over tick by tick (feed_tick),
 the way the engine hears them: tick k has heard the music up to k * period,
@@ -15,6 +16,7 @@ import time
 
 import numpy as np
 
+from marionette.music.bands import fit_frames, wav_bands
 from marionette.music.feature import FRAME_PERIOD, wav_frames
 from marionette.music.follower import sync_ticks
 from marionette.music.source import LiveSource, Sink
@@ -23,15 +25,22 @@ from marionette.music.source import LiveSource, Sink
 class WavSource(LiveSource):
     """The recording at path as a live source, one frame per period [s].
 
-    ``loudness`` [full scale] and ``onsets`` [dB]: its frames, one per period.
-    The latency is None (a recording has no input latency)."""
+    ``loudness`` [full scale] and ``onsets`` [dB]: its frames, one per period;
+    ``bands`` (frames, N_BANDS) [full scale] with bands=True, else None: the
+    sink then gets sink(loudness, onset, bands). The latency is None (a
+    recording has no input latency)."""
 
-    def __init__(self, path, sink: Sink | None = None, period: float = FRAME_PERIOD, on_lost=None):
+    def __init__(self, path, sink: Sink | None = None, period: float = FRAME_PERIOD, on_lost=None,
+                 bands: bool = False):
         super().__init__(sink, on_lost)
         self.path = path
         self.period = float(period)                             # [s]
         self.loudness, self.onsets = wav_frames(path, period)   # [full scale], [dB]
-        self._by_tick = (sync_ticks(self.loudness), sync_ticks(self.onsets))   # tick k: frame k - 1
+        self.bands = None
+        if bands:
+            self.bands = fit_frames(wav_bands(path, period), len(self.loudness))
+        self._by_tick = (sync_ticks(self.loudness), sync_ticks(self.onsets),
+                         None if self.bands is None else sync_ticks(self.bands))   # tick k: frame k - 1
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
 
@@ -41,10 +50,9 @@ class WavSource(LiveSource):
 
     def feed_tick(self, k: int) -> None:
         """Step mode: hand the sink the frame tick k [ticks] has heard, if any."""
-        loud, onset = self._by_tick
+        loud, onset, rows = self._by_tick
         if k < len(loud) and not np.isnan(loud[k]) and self.sink is not None:
-            self.sink(loud[k], onset[k])
-            self.frames += 1
+            self._deliver(loud[k], onset[k], None if rows is None else rows[k])
 
     def start(self) -> "WavSource":
         """Real time: one frame per period from a thread, from now on."""
@@ -66,5 +74,11 @@ class WavSource(LiveSource):
             if self._stop.wait(max(0.0, start + (k + 1) * self.period - time.monotonic())):
                 return
             if self.sink is not None:
-                self.sink(float(value), float(onset))
-                self.frames += 1
+                self._deliver(value, onset, None if self.bands is None else self.bands[k])
+
+    def _deliver(self, value, onset, bands) -> None:
+        if bands is None:
+            self.sink(float(value), float(onset))
+        else:
+            self.sink(float(value), float(onset), bands)
+        self.frames += 1

@@ -1,0 +1,114 @@
+"""The follower on band levels (marionette/music/bands.py, ext/mar_follow.c):
+a show that stores them is followed on them wherever the live frames bring
+as many, on the loudness where they do not (a one-band node), and the
+bands place a cue in a reverberant room sooner than the loudness alone.
+
+Live audio is synthesized music through the simulated tape deck, whose
+time warp is the truth; fixed seeds, several decks each."""
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+import pytest
+
+from marionette.music.bands import bands, fit_frames
+from marionette.music.feature import loudness, onsets
+from marionette.music.follower import STATES, FollowError, Follower, sync_ticks
+from marionette.sim.music import synthesize
+from marionette.sim.tape import Deck, play
+
+T = 0.020                                            # tick [s]
+LOCKED = STATES.index("locked")
+
+
+@functools.cache
+def taught(style, seed):
+    """A synthesized piece, its stored loudness, onsets and band levels."""
+    piece = synthesize(style, seed=seed)
+    loud = loudness(piece.samples, piece.sample_rate)
+    return (piece, loud, onsets(piece.samples, piece.sample_rate),
+            fit_frames(bands(piece.samples, piece.sample_rate), len(loud)))
+
+
+def live_frames(piece, deck):
+    """The deck's recording as the tick hears it: loudness, onsets, band levels, truth [s]."""
+    played = play(piece.samples, piece.sample_rate, deck)
+    n = len(played.truth)
+    loud = sync_ticks(loudness(played.samples, played.sample_rate))[:n]
+    rows = sync_ticks(fit_frames(bands(played.samples, played.sample_rate), len(loud) - 1))
+    return loud, sync_ticks(onsets(played.samples, played.sample_rate))[:n], rows, played.truth
+
+
+def cued_run(style, seed, deck, use_bands, live_bands=True):
+    piece, loud, ons, rows = taught(style, seed)
+    live, live_onsets, live_rows, truth = live_frames(piece, deck)
+    f = Follower(loud, onset=ons, bands=rows if use_bands else None)
+    f.cue(0.0)
+    track = f.run(live, live_onsets, bands=live_rows if live_bands else None)
+    return track, track.position * T - truth
+
+
+def first_lock(track, err, within=0.05):
+    """Live time [s] of the first tick LOCKED within `within` [s] of the truth."""
+    idx = np.flatnonzero((track.state == LOCKED) & (np.abs(err) <= within))
+    return idx[0] * T if len(idx) else math.inf
+
+
+def room(seed, speed):
+    """A tape from the top in a reverberant room (RT60 0.5 s, 20 dB SNR), 25 s."""
+    return Deck(speed=speed, wow=0.002, snr_db=20.0, reverb_s=0.5, sample_rate=16000, seconds=25.0, seed=seed)
+
+
+def test_frames_without_bands_are_followed_on_the_loudness_bit_for_bit():
+    """A show with bands, live frames without (a one-band node): the very
+    track of the same show without bands."""
+    for seed, speed in ((1, 0.96), (2, 1.04)):
+        with_bands, _ = cued_run("pop", 1, room(seed, speed), True, live_bands=False)
+        without, _ = cued_run("pop", 1, room(seed, speed), False)
+        for key in ("position", "rate", "confidence", "state", "flags"):
+            np.testing.assert_array_equal(getattr(with_bands, key), getattr(without, key))
+
+
+def test_bands_place_a_cue_in_a_room_sooner_than_the_loudness():
+    """Cued at the top, 8 decks in a reverberant room at 0.95-1.05 speed:
+    with bands the median deck locks within 50 ms of the truth by 2 s of
+    music (measured 1.6 s), sooner than on the loudness alone (4.2 s), no
+    lock is entered more than 0.5 s off, and 95 % of the ticks from 1 s on
+    are within 50 ms. (One
+    deck, ambient at 1.027, does not lock in its 25 s: its cue fits never
+    lead the piece clearly enough, and the tracker, which follows it,
+    never locks a pending cue on its own: docs/music.md.)"""
+    rng = np.random.default_rng(20261202)
+    locks = {True: [], False: []}
+    within50 = []
+    for case in range(8):
+        style, seed = (("pop", 1), ("waltz", 2), ("techno", 4), ("ambient", 3))[case % 4]
+        deck = room(int(rng.integers(1000)), float(rng.uniform(0.95, 1.05)))
+        for use_bands in (True, False):
+            track, err = cued_run(style, seed, deck, use_bands)
+            locks[use_bands].append(first_lock(track, err))
+            if use_bands:
+                before = np.concatenate([[-1], track.state[:-1]])
+                entries = np.flatnonzero((track.state == LOCKED) & (before != LOCKED))
+                assert np.all(np.abs(err[entries]) <= 0.5), (case, err[entries])
+                within50.append(np.abs(err[int(1.0 / T):]) <= 0.05)
+    assert np.median(locks[True]) <= 2.0, locks[True]
+    assert np.median(locks[True]) < np.median(locks[False]), locks
+    assert np.mean(np.concatenate(within50)) >= 0.95, [np.mean(w) for w in within50]
+
+
+def test_bad_bands_are_refused():
+    piece, loud, ons, rows = taught("pop", 1)
+    bad = rows.copy()
+    bad[10, 2] = -1.0
+    with pytest.raises(FollowError, match=r"stored bands\[10, 2\] = -1.0"):
+        Follower(loud, bands=bad)
+    with pytest.raises(FollowError, match="shape"):
+        Follower(loud, bands=rows[:-1])
+    with pytest.raises(FollowError, match="shape"):
+        Follower(loud, bands=np.ones((len(loud), 9)))
+    f = Follower(loud, bands=rows)
+    out = f.step(0.1, bands=[0.1, 0.2, -0.3, 0.1, 0.1, 0.1])     # refused as a source would be
+    assert out.flags & 1 and f.counters()["bad_input"] == 1
