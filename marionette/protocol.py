@@ -35,7 +35,7 @@ CAN (11-bit identifiers, CANopen-like; firmware_protocol/marionette.dbc)::
 
     encode_can(message) -> [(can_id, data), ...]
     CanDecoder().feed(can_id, data, refusals=False) -> [message] or []   joins STATUS and CONFIG
-        frames, unwraps the SYNC counter (.tick); .counters; .rejected
+        frames and a LOUDNESS's bands, unwraps the SYNC counter (.tick); .counters; .rejected
     decode_can_frames([(can_id, data), ...]) -> [message, ...]      with a fresh CanDecoder
     can_records(buf) -> [(can_id, data), ...]   the engine's CAN ring records (ext/mar_sink.h)
     can_record(can_id, data) -> bytes           one such record

@@ -18,6 +18,7 @@ HOST = "HOST"
 ANY = "Vector__XXX"
 INT20 = (-524287, 524287)   # counts; -524288 is NONE, outside the range
 NONE = -524288
+BANDS = 7                   # band codes in a LOUDNESS bands frame, at most
 U32 = 4294967295
 STATES = {0: "BOOT", 4: "STOPPED", 5: "OPERATIONAL", 127: "PRE_OPERATIONAL"}
 PARAMS = {1: "BEGIN", 2: "WATCHDOG", 16: "MIN", 17: "MAX", 18: "SPEED", 19: "ACCEL", 127: "APPLY"}
@@ -96,9 +97,9 @@ def build(n_nodes: int) -> str:
             signal("seq", 32, 32, mux="m127")])
         values.append((0x600 + n, "param", PARAMS))
         lines += message(0x580 + n, f"LOUDNESS_BANDS_N{n}", 8, me, [
-            signal("counter", 0, 4), signal("bands", 4, 4, lo=1, hi=7),
-            *(signal(f"band{k}", 8 + 8 * k, 8) for k in range(7))])
-        for k in range(7):
+            signal("counter", 0, 4), signal("bands", 4, 4, lo=1, hi=BANDS),
+            *(signal(f"band{k}", 8 + 8 * k, 8) for k in range(BANDS))])
+        for k in range(BANDS):
             values.append((0x580 + n, f"band{k}", {255: "SILENT"}))
         lines += message(0x680 + n, f"LOUDNESS_N{n}", 8, me, [
             signal("frame", 0, 32), signal("loudness", 32, 32, True, lo=0, hi="3.4028234663852886e+38")])

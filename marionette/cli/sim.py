@@ -92,6 +92,8 @@ def run(args) -> int:
         if node is not None and node not in nodes:
             raise MarionetteError(f"{option} {node}: {config.source} has no node {node} "
                                   f"(its nodes: {', '.join(map(str, nodes))})")
+    if args.loudness_only and not args.music:
+        raise MarionetteError("--loudness-only: there is no --music for a node to measure")
     if args.priority:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
