@@ -26,8 +26,6 @@ cdef extern from "mar_proto.h" nogil:
         MAR_STATUS_MAX
         MAR_CONFIG_MAX
         MAR_BANDS_MAX
-        MAR_BAND_TOP_DB
-        MAR_BAND_STEPS_PER_DB
         MAR_BAND_SILENT
         MAR_MSG_SYNC
         MAR_MSG_SETPOINT
