@@ -174,6 +174,11 @@ void mar_fuzz_random_msg(uint64_t *s, mar_msg *m, int can)
         if (below(s, 2))
             bits = 0x3F000000u + (bits & 0x7FFFFFu);                 /* 0.5 .. 1: typical */
         memcpy(&m->loudness.value, &bits, 4);
+        if (below(s, 2)) {                                           /* a band node */
+            m->loudness.n_bands = (uint8_t)(1 + below(s, can ? MAR_CAN_BANDS_MAX : MAR_BANDS_MAX));
+            for (size_t i = 0; i < m->loudness.n_bands; i++)
+                m->loudness.band[i] = (uint8_t)below(s, 256);
+        }
         break;
     }
     default:    /* NACK */

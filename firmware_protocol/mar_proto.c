@@ -1,6 +1,7 @@
 #include "mar_proto.h"
 
 #include <float.h>
+#include <math.h>
 #include <string.h>
 
 #include "mar_bytes.h"
@@ -99,11 +100,18 @@ static long encode_payload(const mar_msg *m, uint8_t *p)
         return 1;
     case MAR_MSG_LOUDNESS: {
         uint32_t bits;
+        size_t k = m->loudness.n_bands;
         if (m->node == MAR_BROADCAST || !loudness_ok(m->loudness.value))
             return MAR_E_VALUE;
+        if (k > MAR_BANDS_MAX)
+            return MAR_E_RANGE;
         memcpy(&bits, &m->loudness.value, 4);
         mar_put32(p, bits);
-        return 4;
+        if (k == 0)
+            return 4;               /* the one-band form */
+        p[4] = (uint8_t)k;
+        memcpy(p + 5, m->loudness.band, k);
+        return (long)(5 + k);
     }
     case MAR_MSG_NACK:
         if (m->node == MAR_BROADCAST || (m->nack.flags & ~MAR_FLAGS_DEFINED))
@@ -216,14 +224,17 @@ static int decode_payload(const uint8_t *p, size_t len, mar_msg *m)
         m->heartbeat.state = p[0];
         return 0;
     case MAR_MSG_LOUDNESS: {
-        if (len != 4)
+        size_t k = len > 4 ? p[4] : 0;      /* the band count, when there is one */
+        if (len != (k ? 5 + k : 4))
             return MAR_E_LENGTH;
         uint32_t bits = mar_get32(p);
         float v;
         memcpy(&v, &bits, 4);
-        if (m->node == MAR_BROADCAST || !loudness_ok(v))
+        if (m->node == MAR_BROADCAST || !loudness_ok(v) || k > MAR_BANDS_MAX)
             return MAR_E_VALUE;
         m->loudness.value = v;
+        m->loudness.n_bands = (uint8_t)k;
+        memcpy(m->loudness.band, p + 5, k);
         return 0;
     }
     case MAR_MSG_NACK:
@@ -398,7 +409,9 @@ int mar_msg_equal(const mar_msg *a, const mar_msg *b)
     case MAR_MSG_HEARTBEAT:
         return a->heartbeat.state == b->heartbeat.state;
     case MAR_MSG_LOUDNESS:
-        return memcmp(&a->loudness.value, &b->loudness.value, 4) == 0;
+        return memcmp(&a->loudness.value, &b->loudness.value, 4) == 0
+            && a->loudness.n_bands == b->loudness.n_bands
+            && memcmp(a->loudness.band, b->loudness.band, a->loudness.n_bands) == 0;
     case MAR_MSG_NACK:
         return a->nack.reason == b->nack.reason && a->nack.flags == b->nack.flags
             && a->nack.ref_type == b->nack.ref_type && a->nack.ref_seq == b->nack.ref_seq;
@@ -420,6 +433,25 @@ int mar_config_reason(const mar_msg *m)
                 return MAR_REASON_BAD_CONFIG;
     }
     return MAR_REASON_ACCEPTED;
+}
+
+int mar_band_code(float db)
+{
+    if (db != db || db > FLT_MAX)
+        return MAR_E_VALUE;             /* NaN, +infinity */
+    if (db >= MAR_BAND_TOP_DB)
+        return 0;
+    float steps = (MAR_BAND_TOP_DB - db) * MAR_BAND_STEPS_PER_DB;   /* > 0, or +infinity */
+    if (!(steps < MAR_BAND_SILENT - 0.5f))
+        return MAR_BAND_SILENT;
+    return (int)(steps + 0.5f);
+}
+
+float mar_band_db(uint8_t code)
+{
+    if (code == MAR_BAND_SILENT)
+        return -INFINITY;
+    return MAR_BAND_TOP_DB - (float)code / MAR_BAND_STEPS_PER_DB;
 }
 
 int mar_reason_of(int status)

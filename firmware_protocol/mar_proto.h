@@ -97,6 +97,14 @@ enum mar_reason {
 #define MAR_STATUS_MAX 59       /* positions in one STATUS: (245 - 6) / 4 */
 #define MAR_CONFIG_MAX 14       /* channels in one CONFIG: (245 - 6) / 17 */
 
+/* LOUDNESS bands (SPEC.md section 4): each band's level is one byte, a code
+ * counting 0.5 dB steps down from +6 dB re full scale (code 0) to -121 dB
+ * (code 254); code 255 is a band below that, or silent. */
+#define MAR_BANDS_MAX 16            /* bands in one serial LOUDNESS */
+#define MAR_BAND_TOP_DB 6           /* level of code 0 [dB re full scale] */
+#define MAR_BAND_STEPS_PER_DB 2     /* codes per dB: steps of 0.5 dB */
+#define MAR_BAND_SILENT 255u        /* below the level of code 254, or 0 */
+
 typedef struct {
     uint8_t node, channel;
     int32_t counts;             /* setpoint [device counts] */
@@ -141,6 +149,8 @@ typedef struct {
         } config;
         struct mar_msg_loudness {
             float value;                /* loudness, >= 0 and finite, in the show's loudness unit */
+            uint8_t n_bands;            /* 0: the loudness alone (a one-band node) */
+            uint8_t band[MAR_BANDS_MAX];   /* band levels, codes (MAR_BAND_*), lowest band first */
         } loudness;
         struct mar_msg_nack {
             uint16_t reason;            /* enum mar_reason */
@@ -184,6 +194,15 @@ int mar_msg_equal(const mar_msg *a, const mar_msg *b);
  * MAR_REASON_BAD_CONFIG (min > max, speed, acceleration, watchdog or tick
  * period 0, a channel listed twice). Channels the node lacks are its own check. */
 int mar_config_reason(const mar_msg *m);
+
+/* The code of a band level [dB re full scale]: 0 .. 254, rounded to the
+ * nearest 0.5 dB step, saturated at code 0 (+6 dB); MAR_BAND_SILENT below
+ * -121.25 dB (and for -infinity, the level of silence); MAR_E_VALUE for
+ * NaN and +infinity. */
+int mar_band_code(float db);
+
+/* The level of a band code [dB re full scale]; -infinity for MAR_BAND_SILENT. */
+float mar_band_db(uint8_t code);
 
 /* The NACK reason for a decoder status (MAR_E_VERSION -> BAD_VERSION, ...). */
 int mar_reason_of(int status);

@@ -101,6 +101,9 @@ long mar_can_encode(const mar_msg *m, mar_can_frame *out, size_t cap)
     case MAR_MSG_CONFIG:
         need = 3 + 4u * m->config.n;
         break;
+    case MAR_MSG_LOUDNESS:
+        need = m->loudness.n_bands ? 2 : 1;
+        break;
     default:
         need = 1;
     }
@@ -187,13 +190,22 @@ long mar_can_encode(const mar_msg *m, mar_can_frame *out, size_t cap)
     case MAR_MSG_LOUDNESS: {
         uint32_t bits;
         float v = m->loudness.value;
+        size_t k = m->loudness.n_bands;
         if (!node_ok(m->node) || !(v >= 0.0f && v <= FLT_MAX))
             return MAR_E_VALUE;
+        if (k > MAR_CAN_BANDS_MAX)
+            return MAR_E_RANGE;
+        if (k > 0) {            /* the bands go first: the LOUDNESS frame completes the message */
+            frame(out, (uint16_t)(MAR_CAN_BANDS + m->node), 8);
+            out->data[0] = (uint8_t)((m->seq & 0xFu) | (k << 4));
+            memcpy(out->data + 1, m->loudness.band, k);
+            out++;
+        }
         memcpy(&bits, &v, 4);
         frame(out, (uint16_t)(MAR_CAN_LOUDNESS + m->node), 8);
         mar_put32(out->data, m->seq);
         mar_put32(out->data + 4, bits);
-        return 1;
+        return (long)need;
     }
     case MAR_MSG_NACK:
         if (!node_ok(m->node) || (m->nack.flags & ~MAR_FLAGS_DEFINED))
@@ -346,7 +358,7 @@ int mar_can_rx_feed(mar_can_rx *rx, const mar_can_frame *f, mar_msg *m)
     uint8_t want = function == MAR_CAN_HEARTBEAT ? 1 : 8;
     switch (function) {
     case MAR_CAN_EMCY: case MAR_CAN_STATUS: case MAR_CAN_HEARTBEAT: case MAR_CAN_LOUDNESS:
-    case MAR_CAN_CONFIG:
+    case MAR_CAN_BANDS: case MAR_CAN_CONFIG:
     case MAR_CAN_SETPOINT: case MAR_CAN_SETPOINT + 0x100u: case MAR_CAN_SETPOINT + 0x200u:
     case MAR_CAN_POSITION: case MAR_CAN_POSITION + 0x100u: case MAR_CAN_POSITION + 0x200u:
         break;
@@ -377,12 +389,31 @@ int mar_can_rx_feed(mar_can_rx *rx, const mar_can_frame *f, mar_msg *m)
         uint32_t bits = mar_get32(d + 4);
         float v;
         memcpy(&v, &bits, 4);
+        mar_can_join *j = &rx->join[node];
+        uint8_t held = j->n_bands;
+        j->n_bands = 0;         /* bands are for the LOUDNESS right after them only */
         if (!(v >= 0.0f && v <= FLT_MAX))
             return MAR_E_VALUE;
         m->type = MAR_MSG_LOUDNESS;
         m->seq = mar_get32(d);
         m->loudness.value = v;
+        m->loudness.n_bands = held && j->bands_counter == (m->seq & 0xFu) ? held : 0;
+        memcpy(m->loudness.band, j->band, m->loudness.n_bands);
         return 1;
+    }
+    case MAR_CAN_BANDS: {
+        mar_can_join *j = &rx->join[node];
+        uint8_t k = d[0] >> 4;
+        j->n_bands = 0;
+        if (k == 0 || k > MAR_CAN_BANDS_MAX)
+            return MAR_E_VALUE;
+        for (size_t i = 1u + k; i < 8; i++)
+            if (d[i] != 0)
+                return MAR_E_VALUE;     /* reserved bytes */
+        j->n_bands = k;
+        j->bands_counter = d[0] & 0xFu;
+        memcpy(j->band, d + 1, k);
+        return 0;
     }
     case MAR_CAN_CONFIG:
         return feed_config(rx, node, d, m);

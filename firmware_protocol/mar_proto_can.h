@@ -13,6 +13,8 @@
  *   0x280 + node  node  8    STATUS positions 0..2    } same layout, actual positions
  *   0x380 + node  node  8    STATUS positions 3..5    }
  *   0x480 + node  node  8    STATUS positions 6..8    }
+ *   0x580 + node  node  8    LOUDNESS bands: frame counter & 0xF (bits 0..3), band count k 1..7
+ *                            (bits 4..7), k band codes, 0 to the end; just before its LOUDNESS
  *   0x600 + node  host  8    CONFIG, one parameter per frame: param, channel, 0, 0, value u32/i32
  *   0x680 + node  node  8    LOUDNESS: frame counter u32, loudness float32
  *   0x700 + node  node  1    HEARTBEAT: state
@@ -35,6 +37,7 @@
 #define MAR_CAN_STATUS 0x180u           /* + node */
 #define MAR_CAN_SETPOINT 0x200u         /* + node + 0x100 * pdo, pdo 0..2 */
 #define MAR_CAN_POSITION 0x280u         /* + node + 0x100 * pdo, pdo 0..2 */
+#define MAR_CAN_BANDS 0x580u            /* + node */
 #define MAR_CAN_CONFIG 0x600u           /* + node */
 #define MAR_CAN_LOUDNESS 0x680u         /* + node */
 #define MAR_CAN_HEARTBEAT 0x700u        /* + node */
@@ -44,6 +47,7 @@
 #define MAR_CAN_PER_PDO 3
 #define MAR_CAN_COUNTS_MAX 524287       /* int20 */
 #define MAR_CAN_COUNTS_NONE (-524288)   /* "this frame carries no value for the channel" */
+#define MAR_CAN_BANDS_MAX 7             /* band codes beside the counter and count in 8 bytes */
 
 /* CONFIG parameters (byte 0 of a 0x600 + node frame). */
 enum mar_can_param {
@@ -67,7 +71,7 @@ typedef struct {
 
 /* The frames of m; returns how many or MAR_E_*. Refuses what does not fit
  * the mapping (node 0 or above 127, channel above 8, counts outside int20,
- * a SYNC poll other than 0xFF). Not carried on CAN, so decoded as 0: the
+ * a SYNC poll other than 0xFF, more than 7 LOUDNESS bands). Not carried on CAN, so decoded as 0: the
  * seq of ESTOP, ESTOP_RELEASE, HEARTBEAT and NACK; SYNC and STATUS carry
  * tick & 0xFF, and setpoint PDOs tick & 0xF (the receiver unwraps them). */
 long mar_can_encode(const mar_msg *m, mar_can_frame *out, size_t cap);
@@ -93,6 +97,9 @@ typedef struct {
     uint8_t flags, state, n;
     uint16_t rejected, seq_gaps;
     int32_t position[MAR_CAN_CHANNELS]; /* [counts] */
+    uint8_t n_bands;                    /* LOUDNESS bands held for the next LOUDNESS (0: none) */
+    uint8_t bands_counter;              /* their frame counter & 0xF */
+    uint8_t band[MAR_CAN_BANDS_MAX];    /* codes */
 } mar_can_join;
 
 typedef struct {
@@ -113,7 +120,9 @@ void mar_can_rx_init(mar_can_rx *rx);
  * (MAR_E_STALE), APPLY without every parameter (MAR_E_INCOMPLETE).
  * Setpoint PDOs decode to SETPOINT messages of up to three entries, with
  * seq the unwrapped tick; STATUS is given once its header and all its
- * position PDOs (same counter) came, in any order. */
+ * position PDOs (same counter) came, in any order; LOUDNESS at its 0x680
+ * frame, with the bands of the node's bands frame before it when that
+ * carried the same 4 counter bits (else without bands). */
 int mar_can_rx_feed(mar_can_rx *rx, const mar_can_frame *f, mar_msg *m);
 
 #endif

@@ -25,6 +25,8 @@ cdef extern from "mar_proto.h" nogil:
         MAR_SETPOINT_MAX
         MAR_STATUS_MAX
         MAR_CONFIG_MAX
+        MAR_BANDS_MAX
+        MAR_BAND_SILENT
         MAR_MSG_SYNC
         MAR_MSG_SETPOINT
         MAR_MSG_ESTOP
@@ -80,6 +82,8 @@ cdef extern from "mar_proto.h" nogil:
         mar_channel_config channel[14]
     struct mar_msg_loudness:
         float value
+        uint8_t n_bands
+        uint8_t band[16]
     struct mar_msg_nack:
         uint16_t reason
         uint8_t flags
@@ -108,6 +112,8 @@ cdef extern from "mar_proto.h" nogil:
     int mar_msg_equal(const mar_msg *a, const mar_msg *b)
     int mar_config_reason(const mar_msg *m)
     int mar_reason_of(int status)
+    int mar_band_code(float db)
+    float mar_band_db(uint8_t code)
 
 
 cdef extern from "mar_deframer.h" nogil:
@@ -134,12 +140,14 @@ cdef extern from "mar_proto_can.h" nogil:
         MAR_CAN_SETPOINT
         MAR_CAN_POSITION
         MAR_CAN_CONFIG
+        MAR_CAN_BANDS
         MAR_CAN_LOUDNESS
         MAR_CAN_HEARTBEAT
         MAR_CAN_NODE_MAX
         MAR_CAN_CHANNELS
         MAR_CAN_COUNTS_MAX
         MAR_CAN_COUNTS_NONE
+        MAR_CAN_BANDS_MAX
         MAR_CAN_FRAMES_MAX
     ctypedef struct mar_can_frame:
         uint16_t id

@@ -10,7 +10,7 @@ marionette.protocol turns them into dataclasses. payload by type:
     CONFIG         (tick_period_us, watchdog_ticks, ((channel, min, max, speed, accel), ...))
     STATUS         (flags, state, rejected, seq_gaps, (position, ...))
     HEARTBEAT      (state,)
-    LOUDNESS       (value,)
+    LOUDNESS       (value, codes)  codes: the band codes, () for the loudness alone
     NACK           (reason, flags, ref_type, ref_seq)
 
 Functions return C status codes (negative, MAR_E_*) where decoding may
@@ -37,6 +37,9 @@ CAN_NODE_MAX = MAR_CAN_NODE_MAX
 CAN_CHANNELS = MAR_CAN_CHANNELS
 CAN_COUNTS_MAX = MAR_CAN_COUNTS_MAX
 CAN_COUNTS_NONE = MAR_CAN_COUNTS_NONE
+BANDS_MAX = MAR_BANDS_MAX
+CAN_BANDS_MAX = MAR_CAN_BANDS_MAX
+BAND_SILENT = MAR_BAND_SILENT
 
 MSG_SYNC = MAR_MSG_SYNC
 MSG_SETPOINT = MAR_MSG_SETPOINT
@@ -69,6 +72,7 @@ CAN_STATUS = MAR_CAN_STATUS
 CAN_SETPOINT = MAR_CAN_SETPOINT
 CAN_POSITION = MAR_CAN_POSITION
 CAN_CONFIG = MAR_CAN_CONFIG
+CAN_BANDS = MAR_CAN_BANDS
 CAN_LOUDNESS = MAR_CAN_LOUDNESS
 CAN_HEARTBEAT = MAR_CAN_HEARTBEAT
 
@@ -121,6 +125,13 @@ cdef int to_msg(object raw, mar_msg *m) except -1:
             if not (0.0 <= value <= FLT_MAX):
                 raise ArgumentError(f"loudness {value!r}: must be finite and >= 0")
             m.loudness.value = <float>value
+            codes = payload[1]
+            n = len(codes)
+            if n > MAR_BANDS_MAX:
+                raise ArgumentError(f"{n} bands in one LOUDNESS; at most {MAR_BANDS_MAX}")
+            for i in range(n):
+                m.loudness.band[i] = codes[i]
+            m.loudness.n_bands = <uint8_t>n
         elif kind == MAR_MSG_NACK:
             m.nack.reason, m.nack.flags, m.nack.ref_type, m.nack.ref_seq = payload
     except OverflowError as exc:
@@ -147,7 +158,8 @@ cdef object from_msg(const mar_msg *m):
     elif t == MAR_MSG_HEARTBEAT:
         payload = (m.heartbeat.state,)
     elif t == MAR_MSG_LOUDNESS:
-        payload = (<double>m.loudness.value,)
+        payload = (<double>m.loudness.value,
+                   tuple([m.loudness.band[i] for i in range(m.loudness.n_bands)]))
     elif t == MAR_MSG_NACK:
         payload = (m.nack.reason, m.nack.flags, m.nack.ref_type, m.nack.ref_seq)
     else:
@@ -242,6 +254,17 @@ def config_reason(raw):
     cdef mar_msg m
     to_msg(raw, &m)
     return mar_config_reason(&m)
+
+
+def band_code(float db):
+    """The code of a band level [dB re full scale] (mar_band_code): 0 .. 255,
+    or E_VALUE for NaN and +infinity."""
+    return mar_band_code(db)
+
+
+def band_db(uint8_t code):
+    """The level of a band code [dB re full scale]; -inf for BAND_SILENT."""
+    return mar_band_db(code)
 
 
 def reason_of(int status):

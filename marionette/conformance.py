@@ -27,6 +27,7 @@ START_TICKS = 50            # how long the tester waits for the first STATUS [ti
 WAY = 0.005                 # a frame's way to the node, at most [s]
 WATCHDOG_SLACK = 2          # the node may notice its watchdog this much late [ticks]
 LATE_TICKS = 10             # how long a tick waits for its STATUS, once the node has answered [ticks]
+LOUDNESS_TICKS = 25         # ticks whose LOUDNESS answers are checked, if the node sends any
 WRAP_FROM = 2**32 - 3       # the tick the seq wrap check restarts at
 SERIAL_BAUD = 1_000_000     # default [baud]
 CAN_BITRATE = 500_000       # default [bit/s]
@@ -74,6 +75,10 @@ class SerialLink:
         if data and self.port.in_waiting:
             data += self.port.read(self.port.in_waiting)
         return self.deframer.feed(data) if data else []
+
+    def refused(self) -> int:
+        """Frames from the node that the decoder refused so far."""
+        return self.deframer.rejected
 
 
 class CanLink:
@@ -135,6 +140,10 @@ class CanLink:
         if msg is None or msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
             return []
         return self.decoder.feed(msg.arbitration_id, bytes(msg.data))
+
+    def refused(self) -> int:
+        """Frames from the node that the decoder refused so far."""
+        return self.decoder.rejected
 
 
 def open_link(kind: str, address: str):
@@ -249,7 +258,7 @@ def run_checks(link, node: int) -> dict:
     """Every check against node over link; the report as a dict."""
     t = Tester(link, node)
     started = time.monotonic()
-    for phase in (_start, _config, _following, _watchdog, _estop_and_wrap, _refused, _reopen):
+    for phase in (_start, _loudness, _config, _following, _watchdog, _estop_and_wrap, _refused, _reopen):
         try:
             phase(t)
         except _Abort as exc:           # the node did not answer: later phases cannot run
@@ -311,6 +320,34 @@ def _start(t: Tester) -> None:
     t.channels = len(t.start)
     if not t.check("4 STATUS", "the node reports at least one channel", t.channels > 0, "0 channels"):
         raise _Abort("4 STATUS", "channels", "no channel to test")
+
+
+def _loudness(t: Tester) -> None:
+    """A node that measures music answers each SYNC with one LOUDNESS after
+    its STATUS, counting its frames, always in the same form; a node that
+    sends none is not checked here."""
+    refused = t.link.refused()
+    answers = t.ticks(LOUDNESS_TICKS, setpoints=False)
+    frames = [m for a in answers for m in a if isinstance(m, P.Loudness)]
+    if not frames and t.link.refused() == refused:
+        t.figures["loudness"] = "none (the node does not measure music)"
+        return
+    forms = sorted({-1 if m.bands is None else len(m.bands) for m in frames})
+    t.figures["loudness"] = ", ".join("the loudness alone" if k < 0 else f"{k} bands" for k in forms)
+    t.check("4 LOUDNESS", "every LOUDNESS frame decodes (lengths, band counts, values)",
+            t.link.refused() == refused, f"{t.link.refused() - refused} frames refused")
+    t.check("4 LOUDNESS", "every frame in the same form (the loudness alone, or as many bands)",
+            len(forms) == 1, f"forms {t.figures['loudness']}")
+    t.check("6 LOUDNESS", f"one LOUDNESS per SYNC answered ({LOUDNESS_TICKS} SYNCs)",
+            abs(len(frames) - LOUDNESS_TICKS) <= 1, f"{len(frames)} LOUDNESS frames")
+    counters = [m.frame for m in frames]
+    t.check("6 LOUDNESS", "the frame counter counts up by one",
+            counters == [(counters[0] + i) % 2**32 for i in range(len(counters))] if counters else False,
+            f"frame counters {counters}")
+    order = [[type(m) for m in a if isinstance(m, (P.Status, P.Loudness))] for a in answers]
+    t.check("6 LOUDNESS", "LOUDNESS after the STATUS of the same answer",
+            all(o.index(P.Loudness) > o.index(P.Status) for o in order if P.Loudness in o and P.Status in o),
+            f"answers {[[k.__name__ for k in o] for o in order]}")
 
 
 def _config_message(t: Tester, watchdog=WATCHDOG_TICKS, channels=None, **change) -> P.Config:
@@ -579,6 +616,8 @@ def format_report(report: dict) -> str:
     f = report["figures"]
     if "first_answer_ticks" in f:
         lines.append(f"first STATUS {f['first_answer_ticks']} ticks after the first SYNC")
+    if "loudness" in f:
+        lines.append(f"LOUDNESS: {f['loudness']}")
     lines.append(f"{report['passed']}/{report['checks']} checks passed in {report['seconds']} s"
                  + ("" if not report["failed"] else f"; {report['failed']} FAILED"))
     return "\n".join(lines)

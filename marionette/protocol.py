@@ -14,7 +14,10 @@ Messages (all integers; counts are device counts, int32)::
         ChannelConfig(channel, min_counts, max_counts, max_speed, max_accel)   [counts], [counts/s], [counts/s^2]
     Status(node, tick, flags=0, state=STATE_OPERATIONAL, rejected=0, seq_gaps=0, positions=())
     Heartbeat(node, state, seq=0)
-    Loudness(node, frame, value)               value is a float32 on the wire (rounded here)
+    Loudness(node, frame, value, bands=None)   value is a float32 on the wire (rounded here); bands:
+                                               band levels [full scale], lowest first, None from a
+                                               node that measures the loudness alone; a byte each
+                                               on the wire (band_code: 0.5 dB steps, rounded here)
     Nack(node, reason, ref_type=0, ref_seq=0, flags=0, seq=0)   reason 0 (REASON_ACCEPTED) acknowledges a CONFIG
     Refused(reason, type, node, seq)           not a message: a frame whose CRC was good but whose content
                                                was refused (what a node answers with a Nack)
@@ -32,7 +35,7 @@ CAN (11-bit identifiers, CANopen-like; firmware_protocol/marionette.dbc)::
 
     encode_can(message) -> [(can_id, data), ...]
     CanDecoder().feed(can_id, data, refusals=False) -> [message] or []   joins STATUS and CONFIG
-        frames, unwraps the SYNC counter (.tick); .counters; .rejected
+        frames and a LOUDNESS's bands, unwraps the SYNC counter (.tick); .counters; .rejected
     decode_can_frames([(can_id, data), ...]) -> [message, ...]      with a fresh CanDecoder
     can_records(buf) -> [(can_id, data), ...]   the engine's CAN ring records (ext/mar_sink.h)
     can_record(can_id, data) -> bytes           one such record
@@ -42,7 +45,8 @@ a CanDecoder gives the tick unwrapped from the SYNCs it has seen, so feed
 it the host's own SYNC frames too when decoding statuses on the host.
 ESTOP, ESTOP_RELEASE, HEARTBEAT and NACK carry no seq on CAN (decoded 0).
 
-Helpers: node_config(figure, node, watchdog_ticks=5) -> Config from a
+Helpers: band_code(level) -> the byte of a band level; band_level(code) -> the level
+[full scale]; node_config(figure, node, watchdog_ticks=5) -> Config from a
 FigureConfig; config_reason(config) -> the reason a node answers it with;
 crc32c(data), cobs_encode(data), cobs_decode(data); fuzz(seed, frames) ->
 dict (the C fuzzer behind ``marionette bench fuzz``).
@@ -57,6 +61,7 @@ Errors: ProtocolError (a ValueError) with .code, a negative E_* status.
 """
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass
 
@@ -70,6 +75,9 @@ WIRE_MAX = _p.WIRE_MAX                  # largest frame on the wire, with its 0x
 SETPOINT_MAX = _p.SETPOINT_MAX          # setpoints in one SETPOINT frame
 STATUS_MAX = _p.STATUS_MAX              # positions in one STATUS
 CONFIG_MAX = _p.CONFIG_MAX              # channels in one CONFIG
+BANDS_MAX = _p.BANDS_MAX                # bands in one LOUDNESS (serial)
+CAN_BANDS_MAX = _p.CAN_BANDS_MAX        # bands in one LOUDNESS on CAN
+BAND_SILENT = _p.BAND_SILENT            # the code of a band below the lowest level, or silent
 
 # message types (the frame's type byte; bit 7: sent by a node)
 SYNC = _p.MSG_SYNC
@@ -134,6 +142,7 @@ CAN_EMCY = _p.CAN_EMCY                  # 0x080 + node: NACK
 CAN_STATUS = _p.CAN_STATUS              # 0x180 + node
 CAN_SETPOINT = _p.CAN_SETPOINT          # 0x200 + 0x100 * pdo + node, pdo 0..2 (channels 3*pdo ..)
 CAN_POSITION = _p.CAN_POSITION          # 0x280 + 0x100 * pdo + node
+CAN_BANDS = _p.CAN_BANDS                # 0x580 + node: LOUDNESS bands, just before their LOUDNESS
 CAN_CONFIG = _p.CAN_CONFIG              # 0x600 + node
 CAN_LOUDNESS = _p.CAN_LOUDNESS          # 0x680 + node
 CAN_HEARTBEAT = _p.CAN_HEARTBEAT        # 0x700 + node
@@ -161,6 +170,22 @@ def _float32(value) -> float:
         return struct.unpack("<f", struct.pack("<f", value))[0]
     except (OverflowError, struct.error):
         return float(value)         # out of float32 range: the encoder refuses it
+
+
+def band_code(level: float) -> int:
+    """The byte that carries a band level (linear [full scale], finite,
+    >= 0): 0.5 dB steps down from +6 dB re full scale (code 0, also for
+    louder levels) to -121 dB (254); BAND_SILENT below that and for 0."""
+    level = float(level)
+    if not 0.0 <= level < math.inf:
+        raise ProtocolError(E_VALUE, f"band level {level!r}: must be finite and >= 0")
+    return _p.band_code(20.0 * math.log10(level) if level > 0 else -math.inf)
+
+
+def band_level(code: int) -> float:
+    """The band level a code stands for [full scale]; 0.0 for BAND_SILENT."""
+    db = _p.band_db(code)
+    return 0.0 if db == -math.inf else 10.0 ** (db / 20.0)
 
 
 @dataclass(frozen=True)
@@ -261,12 +286,19 @@ class Loudness:
     node: int
     frame: int                      # the node's audio frame counter (20 ms frames)
     value: float                    # loudness, >= 0, in the show's loudness unit; float32
+    bands: tuple | None = None      # band levels [full scale], lowest first; None: loudness alone
 
     def __post_init__(self):
         object.__setattr__(self, "value", _float32(self.value))
+        if self.bands is not None:
+            bands = tuple(float(b) for b in self.bands)
+            if all(0.0 <= b < math.inf for b in bands):     # else the encoder names the bad one
+                bands = tuple(band_level(band_code(b)) for b in bands)
+            object.__setattr__(self, "bands", bands or None)
 
     def _raw(self):
-        return (LOUDNESS, self.node, self.frame, (self.value,))
+        codes = () if self.bands is None else tuple(band_code(b) for b in self.bands)
+        return (LOUDNESS, self.node, self.frame, (self.value, codes))
 
 
 @dataclass(frozen=True)
@@ -315,7 +347,7 @@ def _message(raw) -> Message:
     if kind == HEARTBEAT:
         return Heartbeat(node, p[0], seq)
     if kind == LOUDNESS:
-        return Loudness(node, seq, p[0])
+        return Loudness(node, seq, p[0], tuple(band_level(c) for c in p[1]) or None)
     return Nack(node, p[0], p[2], p[3], p[1], seq)
 
 
@@ -470,8 +502,8 @@ class CanDecoder:
 # function code (identifier & 0x780) -> the message type its frames carry
 _CAN_TYPES = {CAN_EMCY: NACK, CAN_STATUS: STATUS, CAN_POSITION: STATUS, CAN_POSITION + 0x100: STATUS,
               CAN_POSITION + 0x200: STATUS, CAN_SETPOINT: SETPOINT, CAN_SETPOINT + 0x100: SETPOINT,
-              CAN_SETPOINT + 0x200: SETPOINT, CAN_CONFIG: CONFIG, CAN_LOUDNESS: LOUDNESS,
-              CAN_HEARTBEAT: HEARTBEAT}
+              CAN_SETPOINT + 0x200: SETPOINT, CAN_CONFIG: CONFIG, CAN_BANDS: LOUDNESS,
+              CAN_LOUDNESS: LOUDNESS, CAN_HEARTBEAT: HEARTBEAT}
 
 
 def _can_refused(status: int, can_id: int, data: bytes) -> Refused:

@@ -97,6 +97,7 @@ def test_plot_refuses_an_unknown_image_format_or_a_missing_folder(show_npz, tmp_
     (["--silent", "9"], ["--silent 9", "no node 9", "1, 2, 3, 4, 5"]),
     (["--silent", "1", "x"], ["--silent", "'x'"]),
     (["--loudness-node", "7"], ["--loudness-node 7", "no node 7"]),
+    (["--loudness-only"], ["--loudness-only", "no --music"]),
     (["--watchdog-ticks", "0"], ["--watchdog-ticks", "'0'"])])
 def test_sim_refuses_bad_faults_before_it_starts(argv, said, capsys):
     refused(capsys, "sim", "--seconds", "0.1", *argv, names=said)

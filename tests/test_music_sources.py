@@ -87,6 +87,17 @@ def test_node_loudness_goes_to_the_sink_while_open_and_counts_refusals():
     assert source.frames == 1 and source.refused == 2 and source.latency is None
 
 
+def test_node_loudness_hands_bands_on_and_a_one_band_frame_as_two_values():
+    got = []
+    source = NodeLoudness(lambda *frame: got.append(frame)).start()
+    source.take(0.5, (0.1, 0.2, 0.0))
+    source.take(0.25)
+    source.take(0.125, None)
+    assert [len(f) for f in got] == [3, 2, 2]
+    assert got[0][0] == 0.5 and np.isnan(got[0][1]) and got[0][2] == (0.1, 0.2, 0.0)
+    assert source.frames == 3
+
+
 class _Link:
     """A link that keeps what the tick writes and hands the test the node monitor."""
 

@@ -44,7 +44,8 @@ def from_json(d: dict):
     if t == "HEARTBEAT":
         return P.Heartbeat(d["node"], d["state"], d["seq"])
     if t == "LOUDNESS":
-        return P.Loudness(d["node"], d["seq"], d["value"])
+        bands = [P.band_level(c) for c in d["bands"]] if "bands" in d else None
+        return P.Loudness(d["node"], d["seq"], d["value"], bands)
     assert t == "NACK", t
     return P.Nack(d["node"], d["reason"], d["ref_type"], d["ref_seq"], d["flags"], d["seq"])
 
@@ -125,6 +126,11 @@ def counts(rng, can=False):
     return int(rng.choice([0, lo, hi, rng.integers(-300, 301), rng.integers(lo, hi + 1)]))
 
 
+def random_band(rng):
+    """A band level [full scale]: silent, far below the lowest code, beyond the top, or in range."""
+    return float(rng.choice([0.0, 1e-9, 5.0, 10 ** rng.uniform(-6, 0.3)]))
+
+
 def random_message(rng, can=False, nodes=DBC_NODES):
     kind = int(rng.integers(9))
     node = int(rng.integers(1, nodes + 1)) if can else int(rng.integers(0, 255))
@@ -159,7 +165,11 @@ def random_message(rng, can=False, nodes=DBC_NODES):
     if kind == 6:
         return P.Heartbeat(node, int(rng.choice([0, 4, 5, 127])), 0 if can else seq)
     if kind == 7:
-        return P.Loudness(node, seq, float(rng.choice([0.0, rng.uniform(0, 2), rng.uniform(0, 1e30)])))
+        value = float(rng.choice([0.0, rng.uniform(0, 2), rng.uniform(0, 1e30)]))
+        if rng.random() < 0.5:
+            return P.Loudness(node, seq, value)
+        n = int(rng.integers(1, (P.CAN_BANDS_MAX if can else P.BANDS_MAX) + 1))
+        return P.Loudness(node, seq, value, [random_band(rng) for _ in range(n)])
     return P.Nack(node, int(rng.integers(0, 2**16)), int(rng.integers(256)), seq, int(rng.integers(0, 32)),
                   0 if can else seq)
 
@@ -265,7 +275,8 @@ def test_encoder_refuses_what_the_decoder_would():
            P.Config(P.BROADCAST), P.Nack(1, 0, flags=0x80), P.Loudness(1, 1, -1.0),
            P.Loudness(1, 1, float("nan")), P.Loudness(1, 1, float("inf")), P.Sync(-1),
            P.Setpoints(2**32, [(1, 0, 0)]), P.Setpoints(1, [(1, 0, 2**31)]),
-           P.Status(1, 1, positions=[0] * (P.STATUS_MAX + 1))]
+           P.Status(1, 1, positions=[0] * (P.STATUS_MAX + 1)),
+           P.Loudness(1, 1, 0.5, [0.1] * (P.BANDS_MAX + 1)), P.Loudness(1, 1, 0.5, [-0.1])]
     for m in bad:
         with pytest.raises(P.ProtocolError):
             P.encode_serial(m)
@@ -378,6 +389,41 @@ def test_loudness_is_float32_on_the_wire():
     assert P.decode_serial(P.encode_serial(m)) == m
 
 
+def test_band_levels_are_bytes_of_half_a_db():
+    rng = np.random.default_rng(SEED + 7)
+    levels = 10 ** rng.uniform(-6, 0.3, 2000)           # -120 dB .. +6 dB re full scale
+    back = np.array([P.band_level(P.band_code(x)) for x in levels])
+    assert np.max(np.abs(20 * np.log10(back / levels))) <= 0.25 + 1e-6
+    assert [P.band_code(x) for x in (0.0, 1e-9, 10 ** (-121.2 / 20), 10 ** (-121.3 / 20))] == \
+        [P.BAND_SILENT, P.BAND_SILENT, 254, P.BAND_SILENT]
+    assert P.band_code(2.0) == 0 and P.band_code(100.0) == 0          # +6 dB and louder: the top code
+    assert P.band_level(P.BAND_SILENT) == 0.0 and P.band_level(0) == pytest.approx(10 ** (6 / 20))
+    assert all(P.band_code(P.band_level(c)) == c for c in range(256))
+    for bad in (-1e-3, float("nan"), float("inf")):
+        with pytest.raises(P.ProtocolError, match="band level"):
+            P.band_code(bad)
+        with pytest.raises(P.ProtocolError, match="band level"):
+            P.encode_serial(P.Loudness(1, 1, 0.5, [0.1, bad]))
+
+
+def test_one_band_and_band_loudness_on_both_links():
+    one = P.Loudness(3, 70, 0.5)
+    six = P.Loudness(3, 71, 0.5, [0.5, 0.25, 0.1, 0.01, 1e-4, 0.0])
+    assert six.bands[-1] == 0.0 and six.bands[0] == pytest.approx(0.5, rel=0.03)
+    assert len(P.encode_body(one)) == 7 + 4 + 4 and len(P.encode_body(six)) == 7 + 4 + 1 + 6 + 4
+    assert P.Deframer().feed(P.encode_serial(one) + P.encode_serial(six)) == [one, six]
+    assert [i for i, _ in P.encode_can(one)] == [P.CAN_LOUDNESS + 3]
+    assert [i for i, _ in P.encode_can(six)] == [P.CAN_BANDS + 3, P.CAN_LOUDNESS + 3]
+    assert P.decode_can_frames(P.encode_can(one) + P.encode_can(six)) == [one, six]
+    # the bands frame lost: the LOUDNESS still comes, without bands
+    assert P.decode_can_frames(P.encode_can(six)[1:]) == [P.Loudness(3, 71, 0.5)]
+    assert P.Loudness(3, 1, 0.5, []) == P.Loudness(3, 1, 0.5)      # no bands is the one-band form
+    with pytest.raises(P.ProtocolError):
+        P.encode_can(P.Loudness(3, 1, 0.5, [0.1] * (P.CAN_BANDS_MAX + 1)))
+    with pytest.raises(P.ProtocolError):
+        P.encode_serial(P.Loudness(3, 1, 0.5, [0.1] * (P.BANDS_MAX + 1)))
+
+
 # -- the DBC and the codec ----------------------------------------------------
 
 def test_committed_dbc_is_what_the_generator_writes():
@@ -396,7 +442,12 @@ def expected_signals(message, frames):
     if isinstance(m, P.Heartbeat):
         return [(P.CAN_HEARTBEAT + m.node, {"state": m.state})]
     if isinstance(m, P.Loudness):
-        return [(P.CAN_LOUDNESS + m.node, {"frame": m.frame, "loudness": m.value})]
+        out = [(P.CAN_LOUDNESS + m.node, {"frame": m.frame, "loudness": m.value})]
+        if m.bands is None:
+            return out
+        codes = [P.band_code(b) for b in m.bands] + [0] * (P.CAN_BANDS_MAX - len(m.bands))
+        return [(P.CAN_BANDS + m.node, {"counter": m.frame & 0xF, "bands": len(m.bands),
+                                         **{f"band{k}": c for k, c in enumerate(codes)}})] + out
     if isinstance(m, P.Nack):
         return [(P.CAN_EMCY + m.node, {"reason": m.reason, "flags": m.flags, "ref_type": m.ref_type,
                                        "ref_seq": m.ref_seq})]
@@ -434,13 +485,13 @@ def expected_signals(message, frames):
 
 def test_dbc_and_codec_agree():
     db = cantools.database.load_file(str(DBC))
-    assert len(db.messages) == 3 + 11 * DBC_NODES
+    assert len(db.messages) == 3 + 12 * DBC_NODES
     rng = np.random.default_rng(SEED + 6)
     seen = set()
     for _ in range(1500):
         m = random_message(rng, can=True)
         if isinstance(m, P.Loudness):
-            m = P.Loudness(m.node, m.frame, min(m.value, 1e6))
+            m = P.Loudness(m.node, m.frame, min(m.value, 1e6), m.bands)
         frames = P.encode_can(m)
         expected = expected_signals(m, frames)
         assert [i for i, _ in frames] == [i for i, _ in expected]
@@ -452,7 +503,7 @@ def test_dbc_and_codec_agree():
             seen.add(msg.name.split("_N")[0])
     assert seen == {"SYNC", "ESTOP", "ESTOP_RELEASE", "SETPOINT_A", "SETPOINT_B", "SETPOINT_C",
                     "STATUS", "POSITION_A", "POSITION_B", "POSITION_C", "CONFIG", "LOUDNESS",
-                    "HEARTBEAT", "NACK"}
+                    "LOUDNESS_BANDS", "HEARTBEAT", "NACK"}
 
 
 def test_dbc_bounds_ranges_and_comments_every_message():
@@ -463,7 +514,8 @@ def test_dbc_bounds_ranges_and_comments_every_message():
               (f"POSITION_A_N{n}", "ch0"): (-P.CAN_COUNTS_MAX, P.CAN_COUNTS_MAX),
               (f"STATUS_N{n}", "channels"): (0, P.CAN_CHANNELS), (f"CONFIG_N{n}", "channels"): (0, P.CAN_CHANNELS),
               (f"CONFIG_N{n}", "begin_channel"): (255, 255), (f"CONFIG_N{n}", "watchdog_ticks"): (1, 65535),
-              (f"CONFIG_N{n}", "min_channel"): (0, P.CAN_CHANNELS - 1)}
+              (f"CONFIG_N{n}", "min_channel"): (0, P.CAN_CHANNELS - 1),
+              (f"LOUDNESS_BANDS_N{n}", "bands"): (1, P.CAN_BANDS_MAX)}
     for (message, name), (lo, hi) in bounds.items():
         sig = db.get_message_by_name(message).get_signal_by_name(name)
         assert (sig.minimum, sig.maximum) == (lo, hi), (message, name)

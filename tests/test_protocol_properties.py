@@ -106,7 +106,8 @@ def test_every_accepted_serial_frame_is_its_message_re_encoded():
             message = P.decode_serial(wire)
         except P.ProtocolError:
             continue
-        assert P.encode_serial(message) == wire + b"\0", (case, wire.hex())
+        # a mutation may have added the 0x00 that decode_serial takes as optional
+        assert P.encode_serial(message) == wire.removesuffix(b"\0") + b"\0", (case, wire.hex())
         accepted += 1
     assert accepted > CASES // 8
 
@@ -170,6 +171,9 @@ def test_every_message_the_can_receiver_gives_is_made_of_its_frames():
                 assert len(frames) == len(held), case
             elif isinstance(message, P.Status):
                 assert all(last[i] == d for i, d in frames), case
+            elif isinstance(message, P.Loudness) and message.bands is not None:
+                (bands_id, bands), loudness = frames                # the node's last bands frame
+                assert last[bands_id] == bands and loudness == (can_id, data), case
             else:
                 assert frames == [(can_id, data)], (case, hex(can_id), data.hex())
     assert set(kinds) == {"Sync", "Setpoints", "Estop", "EstopRelease", "Config", "Status",

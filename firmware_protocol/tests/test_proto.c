@@ -206,6 +206,23 @@ static void test_refusals(void)
         memcpy(p, &bad[i], 4);      /* little-endian host assumed by this test */
         CHECK(mar_decode_body(b, seal(b, 4), &m) == MAR_E_VALUE, "loudness %g accepted", (double)bad[i]);
     }
+    /* LOUDNESS with bands: 4 bytes of loudness, a count k, k codes; a
+     * count that disagrees with the length is refused */
+    memset(p, 0, 5 + MAR_BANDS_MAX + 2);
+    CHECK(mar_decode_body(b, seal(b, 4), &m) == 0 && m.loudness.n_bands == 0, "one-band LOUDNESS");
+    for (size_t len = 5; len <= 5 + MAR_BANDS_MAX + 1; len++)
+        for (unsigned k = 0; k <= MAR_BANDS_MAX + 2; k++) {
+            header(b, 1, MAR_MSG_LOUDNESS, 2, 1);
+            memset(p, 0, 4);
+            p[4] = (uint8_t)k;
+            for (size_t i = 5; i < len; i++)
+                p[i] = (uint8_t)(i * 37);
+            int r = mar_decode_body(b, seal(b, len), &m);
+            int want = k == 0 || len != 5 + k ? MAR_E_LENGTH : k > MAR_BANDS_MAX ? MAR_E_VALUE : 0;
+            CHECK(r == want, "LOUDNESS of %zu bytes with count %u: %d, not %d", len, k, r, want);
+            CHECK(r != 0 || (m.loudness.n_bands == k && m.loudness.band[k - 1] == (uint8_t)((len - 1) * 37)),
+                  "LOUDNESS bands read back (count %u)", k);
+        }
     header(b, 1, MAR_MSG_CONFIG, 2, 1);
     memset(p, 0, 6 + 17);
     CHECK(mar_decode_body(b, seal(b, 6 + 16), &m) == MAR_E_LENGTH, "CONFIG of 22 bytes");
@@ -242,6 +259,11 @@ static void test_refusals(void)
     m.type = MAR_MSG_LOUDNESS;
     m.loudness.value = NAN;
     CHECK(mar_encode_frame(&m, w, sizeof w) == MAR_E_VALUE, "NaN loudness");
+    m.loudness.value = 0.5f;
+    m.loudness.n_bands = MAR_BANDS_MAX + 1;
+    CHECK(mar_encode_frame(&m, w, sizeof w) == MAR_E_RANGE, "17 bands");
+    m.loudness.n_bands = MAR_BANDS_MAX;
+    CHECK(mar_encode_frame(&m, w, sizeof w) > 0, "16 bands");
     m.type = MAR_MSG_CONFIG;
     m.node = 0xFF;
     CHECK(mar_encode_frame(&m, w, sizeof w) == MAR_E_VALUE, "CONFIG to every node");
@@ -439,6 +461,80 @@ static void test_can(int cases)
     free(f);
 }
 
+static void test_band_codes(void)
+{
+    CHECK(mar_band_code(6.0f) == 0 && mar_band_code(40.0f) == 0, "top code");
+    CHECK(mar_band_code(5.76f) == 0 && mar_band_code(5.74f) == 1, "rounding to 0.5 dB");
+    CHECK(mar_band_code(-121.0f) == 254 && mar_band_code(-121.2f) == 254, "lowest code");
+    CHECK(mar_band_code(-121.3f) == MAR_BAND_SILENT && mar_band_code(-INFINITY) == (int)MAR_BAND_SILENT,
+          "silent code");
+    CHECK(mar_band_code(NAN) == MAR_E_VALUE && mar_band_code(INFINITY) == MAR_E_VALUE, "NaN, +inf");
+    CHECK(isinf(mar_band_db(MAR_BAND_SILENT)) && mar_band_db(MAR_BAND_SILENT) < 0, "silent level");
+    for (int c = 0; c < 255; c++)
+        CHECK(mar_band_code(mar_band_db((uint8_t)c)) == c, "code %d does not come back", c);
+    for (int i = 0; i < 20000; i++) {         /* any level in range: within half a step */
+        float db = MAR_BAND_TOP_DB - (float)below(1270000) / 10000.0f;
+        int c = mar_band_code(db);
+        CHECK(c >= 0 && c < 255 && fabsf(mar_band_db((uint8_t)c) - db) <= 0.25f + 1e-4f,
+              "%g dB -> code %d (%g dB)", (double)db, c, (double)mar_band_db((uint8_t)c));
+    }
+}
+
+static void test_can_bands(void)
+{
+    mar_can_rx rx;
+    mar_msg m, out;
+    mar_can_frame f[2], odd;
+    memset(&m, 0, sizeof m);
+    m.type = MAR_MSG_LOUDNESS;
+    m.node = 9;
+    m.seq = 0x12345678u;
+    m.loudness.value = 0.25f;
+    m.loudness.n_bands = 6;
+    memcpy(m.loudness.band, (uint8_t[]){ 0, 40, 80, 120, 254, 255 }, 6);
+    CHECK(mar_can_encode(&m, f, 2) == 2 && f[0].id == MAR_CAN_BANDS + 9 && f[1].id == MAR_CAN_LOUDNESS + 9
+          && f[0].dlc == 8 && f[0].data[0] == 0x68 && f[0].data[7] == 0, "bands frame, then LOUDNESS");
+    mar_can_rx_init(&rx);
+    CHECK(mar_can_rx_feed(&rx, &f[0], &out) == 0 && mar_can_rx_feed(&rx, &f[1], &out) == 1
+          && mar_msg_equal(&m, &out), "bands joined");
+    /* a LOUDNESS whose bands frame was lost: the loudness alone */
+    CHECK(mar_can_rx_feed(&rx, &f[1], &out) == 1 && out.loudness.n_bands == 0, "bands used twice");
+    /* bands of another frame (a LOUDNESS lost in between) are dropped */
+    odd = f[0];
+    odd.data[0] = (uint8_t)((odd.data[0] & 0xF0u) | ((odd.data[0] + 15u) & 0xFu));
+    CHECK(mar_can_rx_feed(&rx, &odd, &out) == 0 && mar_can_rx_feed(&rx, &f[1], &out) == 1
+          && out.loudness.n_bands == 0, "stale bands joined");
+    /* another node's bands are not this node's */
+    odd = f[0];
+    odd.id = MAR_CAN_BANDS + 10;
+    CHECK(mar_can_rx_feed(&rx, &odd, &out) == 0 && mar_can_rx_feed(&rx, &f[1], &out) == 1
+          && out.loudness.n_bands == 0, "another node's bands joined");
+    /* malformed bands frames: count 0 or 8+, reserved bytes, DLC other than 8 */
+    for (unsigned k = 0; k < 16; k++)
+        for (int junk = 0; junk < 2; junk++) {
+            odd = f[0];
+            memset(odd.data + 1, 0, 7);
+            memset(odd.data + 1, 7, k < 7 ? k : 7);
+            odd.data[0] = (uint8_t)((k << 4) | 8u);
+            if (junk)
+                odd.data[7] = 7;        /* a reserved byte when k < 7 */
+            int want = k >= 1 && k <= MAR_CAN_BANDS_MAX && !(junk && k < 7) ? 0 : MAR_E_VALUE;
+            CHECK(mar_can_rx_feed(&rx, &odd, &out) == want, "bands count %u junk %d", k, junk);
+            int r = mar_can_rx_feed(&rx, &f[1], &out);
+            CHECK(r == 1 && out.loudness.n_bands == (want == 0 ? k : 0u), "after count %u: %u bands",
+                  k, out.loudness.n_bands);
+        }
+    for (uint8_t dlc = 0; dlc < 8; dlc++) {
+        odd = f[0];
+        odd.dlc = dlc;
+        CHECK(mar_can_rx_feed(&rx, &odd, &out) == MAR_E_LENGTH, "bands frame of DLC %u", dlc);
+    }
+    m.loudness.n_bands = MAR_CAN_BANDS_MAX + 1;
+    CHECK(mar_can_encode(&m, f, 2) == MAR_E_RANGE, "8 bands on CAN");
+    m.loudness.n_bands = 1;
+    CHECK(mar_can_encode(&m, f, 1) == MAR_E_SHORT, "two frames in a buffer of one");
+}
+
 static void test_fuzz(void)
 {
     mar_fuzz_report r;
@@ -464,6 +560,8 @@ int main(void)
     test_deframer_resync();
     test_setpoint_batches();
     test_can(20000);
+    test_band_codes();
+    test_can_bands();
     test_fuzz();
     if (failures) {
         fprintf(stderr, "%d checks failed\n", failures);

@@ -6,7 +6,7 @@ share of the tick they take, for 16 axes on the links SPEC.md discusses.
 Frame sizes come from the codec itself (marionette.protocol). Per tick the
 host sends SYNC and the setpoints; every node answers with STATUS (poll all;
 "1 STATUS" rows: round-robin polling, the largest node's answer); one node
-sends LOUDNESS; each node sends a HEARTBEAT every 50 ticks (averaged).
+sends LOUDNESS with N_BANDS band levels; each node sends a HEARTBEAT every 50 ticks (averaged).
 Serial: 10 bits per byte (8N1). CAN: classic frames with 11-bit identifiers,
 47 + 8n bits plus the worst-case stuff bits floor((34 + 8n - 1) / 4), for n
 data bytes (Davis et al., "Controller Area Network (CAN) schedulability
@@ -18,6 +18,7 @@ from __future__ import annotations
 import sys
 
 from marionette import protocol as P
+from marionette.music.bands import N_BANDS      # band levels in the LOUDNESS
 
 TICK = 0.020                # [s]
 HEARTBEAT_TICKS = 50        # a heartbeat per node every 50 ticks (1 s)
@@ -43,11 +44,12 @@ def traffic(layout):
     statuses = [P.Status(node, tick, positions=[12000] * k) for node, k in layout]
     out_serial = len(P.encode_serial(P.Sync(tick))) + len(P.encode_serial(P.Setpoints(tick, entries)))
     status_serial = [len(P.encode_serial(s)) for s in statuses]
-    loud_serial = len(P.encode_serial(P.Loudness(6, tick, 0.5)))
+    loudness = P.Loudness(6, tick, 0.5, [0.1] * N_BANDS)
+    loud_serial = len(P.encode_serial(loudness))
     beat_serial = len(P.encode_serial(P.Heartbeat(1, P.STATE_OPERATIONAL))) * len(layout) / HEARTBEAT_TICKS
     out_can = [len(d) for m in (P.Sync(tick), P.Setpoints(tick, entries)) for _, d in P.encode_can(m)]
     status_can = [[len(d) for _, d in P.encode_can(s)] for s in statuses]
-    loud_can = [len(d) for _, d in P.encode_can(P.Loudness(6, tick, 0.5))]
+    loud_can = [len(d) for _, d in P.encode_can(loudness)]
     beat_bits = can_bits(1) * len(layout) / HEARTBEAT_TICKS
     return dict(out_serial=out_serial, status_serial=status_serial, loud_serial=loud_serial,
                 beat_serial=beat_serial, out_can=out_can, status_can=status_can, loud_can=loud_can,

@@ -18,6 +18,7 @@ HOST = "HOST"
 ANY = "Vector__XXX"
 INT20 = (-524287, 524287)   # counts; -524288 is NONE, outside the range
 NONE = -524288
+BANDS = 7                   # band codes in a LOUDNESS bands frame, at most
 U32 = 4294967295
 STATES = {0: "BOOT", 4: "STOPPED", 5: "OPERATIONAL", 127: "PRE_OPERATIONAL"}
 PARAMS = {1: "BEGIN", 2: "WATCHDOG", 16: "MIN", 17: "MAX", 18: "SPEED", 19: "ACCEL", 127: "APPLY"}
@@ -95,6 +96,11 @@ def build(n_nodes: int) -> str:
             signal("channels", 8, 8, mux="m127", hi=9),
             signal("seq", 32, 32, mux="m127")])
         values.append((0x600 + n, "param", PARAMS))
+        lines += message(0x580 + n, f"LOUDNESS_BANDS_N{n}", 8, me, [
+            signal("counter", 0, 4), signal("bands", 4, 4, lo=1, hi=BANDS),
+            *(signal(f"band{k}", 8 + 8 * k, 8) for k in range(BANDS))])
+        for k in range(BANDS):
+            values.append((0x580 + n, f"band{k}", {255: "SILENT"}))
         lines += message(0x680 + n, f"LOUDNESS_N{n}", 8, me, [
             signal("frame", 0, 32), signal("loudness", 32, 32, True, lo=0, hi="3.4028234663852886e+38")])
         floats.append((0x680 + n, "loudness"))
@@ -108,6 +114,8 @@ def build(n_nodes: int) -> str:
             *(f'CM_ BO_ {0x280 + 0x100 * k + n} "Actual positions of node {n}, channels '
               f'{3 * k}..{3 * k + 2}; NONE: no such channel";' for k in range(3)),
             f'CM_ BO_ {0x600 + n} "CONFIG of node {n}, one parameter per frame from BEGIN (1) to APPLY (127)";',
+            f'CM_ BO_ {0x580 + n} "Band levels of node {n}\'s next LOUDNESS (counter = its frame mod 16): '
+            f'code c is +6 dB - 0.5 dB * c re full scale, 255 silent; band codes past the count are reserved (0)";',
             f'CM_ BO_ {0x680 + n} "Loudness of one 20 ms audio frame measured by node {n}";',
             f'CM_ BO_ {0x700 + n} "Heartbeat of node {n}: its state";',
             *(f'CM_ SG_ {can_id} reserved "Reserved: sent as 0; a frame where it is not 0 is refused";'

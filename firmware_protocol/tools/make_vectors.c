@@ -17,6 +17,8 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "mar_cobs.h"
+#include "mar_crc.h"
 #include "mar_proto.h"
 #include "mar_proto_can.h"
 
@@ -84,6 +86,12 @@ static void message(FILE *f, const mar_msg *m)
             fprintf(f, ", \"value\": -0.0");      /* JSON's -0 would read back as 0 */
         else
             fprintf(f, ", \"value\": %.9g", (double)m->loudness.value);
+        if (m->loudness.n_bands > 0) {          /* band codes, as on the wire */
+            fprintf(f, ", \"bands\": [");
+            for (size_t i = 0; i < m->loudness.n_bands; i++)
+                fprintf(f, "%s%u", i ? ", " : "", m->loudness.band[i]);
+            fputc(']', f);
+        }
         break;
     case MAR_MSG_NACK:
         fprintf(f, ", \"reason\": %u, \"flags\": %u, \"ref_type\": %u, \"ref_seq\": %lu", m->nack.reason,
@@ -199,6 +207,19 @@ static size_t messages(mar_msg *out, const char **names)
     m = msg(MAR_MSG_LOUDNESS, 6, 1002);
     m.loudness.value = -0.0f;
     names[n] = "loudness_minus_zero", out[n++] = m;
+    /* six bands (the simulator's): -0 dB .. -121 dB and a silent band */
+    static const uint8_t six[6] = { 12, 20, 35, 60, 254, MAR_BAND_SILENT };
+    m = msg(MAR_MSG_LOUDNESS, 6, 1003);
+    m.loudness.value = 0.125f;
+    m.loudness.n_bands = 6;
+    memcpy(m.loudness.band, six, 6);
+    names[n] = "loudness_6_bands", out[n++] = m;
+    m = msg(MAR_MSG_LOUDNESS, 6, 1004);     /* the most a serial LOUDNESS holds; not on CAN */
+    m.loudness.value = 0.25f;
+    m.loudness.n_bands = MAR_BANDS_MAX;
+    for (size_t i = 0; i < MAR_BANDS_MAX; i++)
+        m.loudness.band[i] = (uint8_t)(17 * i);
+    names[n] = "loudness_16_bands", out[n++] = m;
 
     m = msg(MAR_MSG_NACK, 5, 0);
     m.nack.reason = MAR_REASON_BAD_CONFIG;
@@ -293,6 +314,7 @@ static const char *error_name(int status)
     switch (status) {
     case MAR_E_COBS: return "E_COBS";
     case MAR_E_VALUE: return "E_VALUE";
+    case MAR_E_LENGTH: return "E_LENGTH";
     case MAR_E_INCOMPLETE: return "E_INCOMPLETE";
     case MAR_E_STALE: return "E_STALE";
     default: return "?";
@@ -323,6 +345,29 @@ static int write_refused(FILE *f, const mar_msg *sixty)
     /* not answered: a node cannot trust the header of a frame it could not decode */
     fprintf(f, ", \"error\": \"%s\", \"reason\": null}", error_name(r));
 
+    /* LOUDNESS whose band count disagrees with its length, or is too many;
+     * sent by a node, so nobody answers it */
+    static const struct { const char *name; uint8_t count, codes; } loud[] = {
+        { "loudness_count_0", 0, 0 }, { "loudness_count_6_with_5_codes", 6, 5 },
+        { "loudness_count_4_with_5_codes", 4, 5 }, { "loudness_17_bands", 17, 17 } };
+    for (size_t i = 0; i < sizeof loud / sizeof loud[0]; i++) {
+        uint8_t body[MAR_FRAME_MAX] = { MAR_PROTO_VERSION, MAR_MSG_LOUDNESS, 6, 0xEC, 0x03, 0, 0,
+                                        0, 0, 0, 0x3F };     /* frame 1004, loudness 0.5 */
+        size_t len = 11;
+        body[len++] = loud[i].count;
+        for (size_t k = 0; k < loud[i].codes; k++)
+            body[len++] = (uint8_t)(40 + k);
+        uint32_t crc = mar_crc32c(body, len);
+        for (int k = 0; k < 4; k++)
+            body[len++] = (uint8_t)(crc >> (8 * k));
+        size_t e = mar_cobs_encode(body, len, wire);
+        wire[e++] = 0;
+        r = mar_decode_frame(wire, e, &m);
+        fprintf(f, ",\n  {\"name\": \"%s\", \"link\": \"serial\", \"wire\": ", loud[i].name);
+        hex(f, wire, e);
+        fprintf(f, ", \"error\": \"%s\", \"reason\": null}", error_name(r));
+    }
+
     static const mar_can_frame sync = { MAR_CAN_SYNC, 1, { 5, 0, 0, 0, 0, 0, 0, 0 } };
     mar_can_frame begin = can_frame(MAR_CAN_CONFIG + 5, MAR_CAN_PARAM_BEGIN, 0xFF, 0, 20000);
     mar_can_frame none;
@@ -341,6 +386,9 @@ static int write_refused(FILE *f, const mar_msg *sixty)
         { "config_reserved_byte", begin, can_frame(MAR_CAN_CONFIG + 5, MAR_CAN_PARAM_MIN, 0, 1, 0) },
         { "config_apply_without_begin", sync, can_frame(MAR_CAN_CONFIG + 5, MAR_CAN_PARAM_APPLY, 0, 0, 7) },
         { "status_reserved_flag", sync, can_frame(MAR_CAN_STATUS + 5, 5, 0x20, MAR_STATE_OPERATIONAL, 0) },
+        { "loudness_bands_count_0", sync, can_frame(MAR_CAN_BANDS + 5, 0x0C, 40, 41, 0) },
+        { "loudness_bands_count_8", sync, can_frame(MAR_CAN_BANDS + 5, 0x8C, 40, 41, 0x2D2C2B2Au) },
+        { "loudness_bands_reserved_byte", sync, can_frame(MAR_CAN_BANDS + 5, 0x2C, 40, 41, 1u << 24) },
     };
     for (size_t i = 0; i < sizeof can / sizeof can[0]; i++) {
         static mar_can_rx rx;

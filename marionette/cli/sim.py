@@ -54,8 +54,11 @@ def register(sub) -> None:
                         "so that a command stream asking too much shows in the summary's "
                         "peak_accel [unit/s^2, from positions sampled once per tick]")
     p.add_argument("--music", type=input_file,
-                   help="a node measures this recording's loudness, played from the "
-                        "start of the run, and reports it in LOUDNESS messages")
+                   help="a node measures this recording's loudness and band loudness, played "
+                        "from the start of the run, and reports them in LOUDNESS messages")
+    p.add_argument("--loudness-only", action="store_true",
+                   help="with --music: the node sends the loudness alone, without bands (a "
+                        "one-band node, as before bands were in the protocol)")
     p.add_argument("--loudness-node", type=Number(int, 0, 255),
                    help="the node that does (default: the figure's last)")
     p.add_argument("--priority", type=PRIORITY, default=0,
@@ -89,6 +92,8 @@ def run(args) -> int:
         if node is not None and node not in nodes:
             raise MarionetteError(f"{option} {node}: {config.source} has no node {node} "
                                   f"(its nodes: {', '.join(map(str, nodes))})")
+    if args.loudness_only and not args.music:
+        raise MarionetteError("--loudness-only: there is no --music for a node to measure")
     if args.priority:
         try:
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(args.priority))
@@ -109,7 +114,7 @@ def run(args) -> int:
     node = args.loudness_node if args.loudness_node is not None else nodes[-1]
     figure = SimFigure(config, faults, args.watchdog_ticks or DEFAULT_WATCHDOG_TICKS,
                        trace=bool(args.trace), music=music, music_node=node,
-                       clip_accel=not args.no_accel_clip)
+                       clip_accel=not args.no_accel_clip, music_bands=not args.loudness_only)
     if args.can == "slcan":
         front = SlcanFrontEnd()
     elif args.can == "udp_multicast":

@@ -112,7 +112,13 @@ class BandMeter(LoudnessMeter):
         keep = int(np.floor(k * self.sample_rate * self.period)) + self.frame_len - self.window_len
         self._samples = self._samples[keep - self._first:]
         self._first = keep
-        power = np.abs(np.fft.rfft(windows * self._window, axis=1)) ** 2
+        return self.window_bands(windows)
+
+    def window_bands(self, windows) -> np.ndarray:
+        """Band loudness rows (rows, n_bands) of analysis windows (rows,
+        window_len) of mono samples [full scale], each the WINDOW_FRAMES
+        frames up to the end of the frame it measures."""
+        power = np.abs(np.fft.rfft(np.atleast_2d(windows) * self._window, axis=1)) ** 2
         return np.sqrt(power @ self._weights.T * self._scale)
 
 

@@ -4,7 +4,11 @@ marionette.music.source declares it.
 
 The messages come in on the link's receive path, which the engine's
 LinkSupervisor runs (marionette.transport); its NodeMonitor calls take()
-with each value. The nodes send the loudness alone, so the onset is NaN.
+with each value and its bands. A node measures no onsets, so the onset is
+NaN; a band node's frames go to ``sink(loudness, onset, bands)`` with the
+band levels [full scale] (the unit of marionette.music.bands), a one-band
+node's to ``sink(loudness, onset)``. On CAN a band node's frame whose bands
+frame was lost comes as a one-band frame.
 start() and stop() open and close the gate to the sink; the engine opens it
 when it is made and closes it when it is closed.
 """
@@ -36,12 +40,16 @@ class NodeLoudness(LiveSource):
     def stop(self) -> None:
         self._open = False
 
-    def take(self, value: float) -> None:
-        """One LOUDNESS value (linear, >= 0), on the link's receive thread."""
+    def take(self, value: float, bands=None) -> None:
+        """One LOUDNESS value (linear, >= 0) and its band levels (linear
+        [full scale], or None), on the link's receive thread."""
         if not self._open or self.sink is None:
             return
         try:
-            self.sink(value, float("nan"))
+            if bands is None:
+                self.sink(value, float("nan"))
+            else:
+                self.sink(value, float("nan"), bands)
         except (ValueError, EngineError):
             self.refused += 1
             return

@@ -10,7 +10,9 @@ A frame is the music's loudness (linear [full scale], >= 0) and its onset
 strength [dB] (NaN: the source has none, as the servo nodes' LOUDNESS);
 ``sink(loudness, onset)`` gets them, in order, on the source's own thread
 (or, for a recording in step mode, on the caller's). The sound card made
-without onsets calls ``sink(loudness)`` alone.
+without onsets calls ``sink(loudness)`` alone; the servo nodes' source
+calls ``sink(loudness, onset, bands)`` for a node that measures band
+levels (linear [full scale], marionette.music.bands' unit).
 
 The implementations: ``sound_card.SoundCard``, ``wav_source.WavSource`` (a
 recording played as if live) and ``node_source.NodeLoudness`` (the servo

@@ -13,6 +13,7 @@ import numpy as np
 
 from marionette import protocol
 from marionette.config import FigureConfig
+from marionette.music.bands import BandMeter
 from marionette.music.feature import LoudnessMeter, mono
 from marionette.sim.faults import Faults
 from marionette.sim.node import DEFAULT_WATCHDOG_TICKS, SimNode
@@ -22,12 +23,14 @@ class SimFigure:
     def __init__(self, config: FigureConfig, faults: Faults | None = None,
                  watchdog_ticks: int = DEFAULT_WATCHDOG_TICKS, trace: bool = False,
                  music: tuple[np.ndarray, float] | None = None, music_node: int | None = None,
-                 clip_accel: bool = True):
+                 clip_accel: bool = True, music_bands: bool = True):
         """clip_accel: False for drives that do not clip acceleration
         (ServoModel), so that a command stream asking too much shows in
         peak_accel(). music: (samples, sample rate [Hz]) of a recording that plays from
         model time 0; node music_node measures it and answers each SYNC with
-        a LOUDNESS of the tick period just before that SYNC."""
+        a LOUDNESS of the tick period just before that SYNC: its loudness
+        and, with music_bands, its band loudness (BandMeter), else the
+        loudness alone (a one-band node)."""
         self.config = config
         self.faults = faults or Faults()
         by_node = defaultdict(list)
@@ -43,6 +46,7 @@ class SimFigure:
             samples, rate = music
             self.music = mono(samples)                                # [full scale]
             self._meter = LoudnessMeter(rate, config.tick_period)
+            self._band_meter = BandMeter(rate, config.tick_period) if music_bands else None
         self.music_node = music_node
         self._music_sent = 0                # LOUDNESS frames sent
         # (SYNC arrival [s], tick, positions [unit] in figure order, their model time [s])
@@ -119,23 +123,29 @@ class SimFigure:
             if sync.poll in (protocol.BROADCAST, sim.node):
                 answers += sim.answer(sync.tick, rejected, self.faults.noise(len(sim.channels)))
         if self.music is not None and self.music_node not in self.faults.silent:
-            value = self._loudness_before(t)
-            if value is not None:
-                answers.append(protocol.Loudness(self.music_node, self._music_sent, value))
+            frame = self._music_before(t)
+            if frame is not None:
+                answers.append(protocol.Loudness(self.music_node, self._music_sent, *frame))
                 self._music_sent += 1
         return answers
 
-    def _loudness_before(self, t: float) -> float | None:
+    def _music_before(self, t: float) -> tuple | None:
         """Loudness of the music in the tick period before model time t [s]
-        [full scale]; None before the music has played a whole period or
-        after its end. Measured at the SYNC so that its age at the host is
-        fixed (one period plus the answer's way), whatever the phase between
-        the host's ticks and the start of the music."""
+        [full scale], and its band loudness (None for a one-band node); None
+        before the music has played a whole period or after its end.
+        Measured at the SYNC so that its age at the host is fixed (one period
+        plus the answer's way), whatever the phase between the host's ticks
+        and the start of the music."""
         rate, n = self._meter.sample_rate, self._meter.frame_len
         start = int(np.floor((t - self.config.tick_period) * rate))     # [samples]
         if start < 0 or start + n > len(self.music):
             return None
-        return float(self._meter.frame_loudness(self.music[start:start + n])[0])
+        value = float(self._meter.frame_loudness(self.music[start:start + n])[0])
+        if self._band_meter is None:
+            return value, None
+        window = self.music[max(0, start + n - self._band_meter.window_len):start + n]
+        window = np.pad(window, (self._band_meter.window_len - len(window), 0))   # silence before the music
+        return value, tuple(self._band_meter.window_bands(window)[0])
 
     def trace_arrays(self) -> dict:
         """The trace as arrays: time (SYNC arrival) [s], tick, positions [unit]

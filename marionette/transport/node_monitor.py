@@ -51,7 +51,7 @@ class NodeMonitor:
         self.log = log
         if log is not None:
             log.write("time_s,node,tick,flags,state,rejected,seq_gaps,positions\n")
-        self.on_loudness = on_loudness                          # called with each LOUDNESS value
+        self.on_loudness = on_loudness      # called with each LOUDNESS's value and bands (None: one band)
         self.keep_history = keep_history
         self.frames_ok = 0
         self.frames_bad = 0                                     # rejected by the deframer or decoder
@@ -87,7 +87,7 @@ class NodeMonitor:
             with self._lock:
                 self.frames_ok += 1
             if self.on_loudness is not None:
-                self.on_loudness(message.value)
+                self.on_loudness(message.value, message.bands)
 
     def on_status(self, node: int, tick: int, flags: int, positions, now: float | None = None,
                   rejected: int = 0, seq_gaps: int = 0) -> None:

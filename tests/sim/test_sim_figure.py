@@ -6,6 +6,7 @@ import pytest
 
 from marionette import protocol
 from marionette.config import load_config
+from marionette.music.bands import N_BANDS, BandMeter, bands
 from marionette.music.feature import LoudnessMeter
 from marionette.sim.faults import Faults
 from marionette.sim.figure import SimFigure
@@ -168,6 +169,37 @@ def test_loudness_answered_at_a_sync_measures_the_period_before_it(figure):
         frames.append(got[0].frame)
     assert frames == list(range(len(frames)))                          # the node's frame counter
     assert len(set(values)) > 100                                       # the level really moved
+
+
+@pytest.mark.parametrize("music_bands", [True, False])
+def test_a_band_node_sends_the_bands_of_the_period_before_the_sync(figure, music_bands):
+    rng = np.random.default_rng(5)
+    rate = 16000.0                                                      # [Hz]
+    ts = np.arange(int(2.0 * rate)) / rate                              # [s]
+    # a tone whose pitch and level jump every 30 ms, so every band moves
+    f = 10 ** rng.uniform(np.log10(60), np.log10(4000), 70)[(ts / 0.03).astype(int)]      # [Hz]
+    level = 10.0 ** rng.uniform(-3, 0, 70)[(ts / 0.03).astype(int)]    # [full scale]
+    samples = level * np.sin(2 * np.pi * np.cumsum(f) / rate)
+    sim = SimFigure(figure, music=(samples, rate), music_node=5, music_bands=music_bands)
+    window = BandMeter(rate, T).window_len                              # [samples]
+    phase = rng.uniform(0.0, T)
+    checked = 0
+    for k in range(95):
+        t = k * T + phase                                               # SYNC arrival [s]
+        got = [a for a in sim.handle(wire(protocol.Sync(k, protocol.BROADCAST)), t)
+               if isinstance(a, protocol.Loudness)]
+        end = int(np.floor((t - T) * rate)) + int(rate * T)             # the period's end [samples]
+        if not got or end < window:
+            continue
+        if not music_bands:
+            assert got[0].bands is None
+            continue
+        # BandMeter on the same audio: the window ending where the period ends
+        want = bands(samples[end - window:end], rate)[-1]
+        assert len(got[0].bands) == N_BANDS
+        assert np.max(np.abs(20 * np.log10(np.array(got[0].bands) / want))) <= 0.25 + 1e-6
+        checked += 1
+    assert checked > 80 or not music_bands
 
 
 def _sealed(body: bytes) -> bytes:
