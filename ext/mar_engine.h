@@ -12,6 +12,7 @@
 
 #include "mar_follow.h"
 #include "mar_hist.h"
+#include "mar_lag.h"
 #include "mar_limits.h"
 #include "mar_move.h"
 #include "mar_ring.h"
@@ -79,7 +80,8 @@ enum mar_mode {
 enum mar_request {
     MAR_REQ_GOTO = 1,           /* move to the given pose, then hold; NaN targets: stop where possible */
     MAR_REQ_BLEND = 2,          /* move to the show's pose at the playback position, then play */
-    MAR_REQ_STOP = 3,           /* decelerate to rest at the acceleration limit (e-stop ramp), then hold */
+    MAR_REQ_STOP = 3,           /* each drive, from its predicted motion, to rest at its acceleration limit
+                                 * (the stop ramp), then hold */
 };
 
 /* Flags in a record. */
@@ -98,6 +100,9 @@ enum mar_request {
 #define MAR_FLAG_LINK_LOST 2048u /* the setpoints' descriptor is gone (write() failed for good, e.g. EIO: the
                                   * pty's other end closed, a USB adapter unplugged): every node counts as
                                   * silent from the next tick on (also MAR_FLAG_NODE_SILENT); latched */
+#define MAR_FLAG_STOPPING 4096u /* a stop ramp drives the commands (also MAR_FLAG_MOVING): the drives brake
+                                 * at their limits from their predicted motion, and the acceleration
+                                 * bound acts on that motion, not on the commands (docs/architecture.md) */
 
 /* A flight-recorder record, followed in memory by n_axes commands [unit]
  * and n_axes excesses [unit]: per axis, the target the limits did not let

@@ -76,6 +76,7 @@ cdef extern from "mar_engine.h" nogil:
         MAR_FLAG_FAULT_HOLD
         MAR_FLAG_OVERRUNS
         MAR_FLAG_LINK_LOST
+        MAR_FLAG_STOPPING
     enum mar_fault_reaction:
         MAR_FAULT_CONTINUE
         MAR_FAULT_STOP

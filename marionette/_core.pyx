@@ -41,6 +41,7 @@ FLAG_FAULT_STOP = MAR_FLAG_FAULT_STOP     # a fault stopped the show (stop ramp,
 FLAG_FAULT_HOLD = MAR_FLAG_FAULT_HOLD     # the show holds for a silent node until every node answers
 FLAG_OVERRUNS = MAR_FLAG_OVERRUNS         # the overrun threshold was reached (with FAULT_STOP), latched
 FLAG_LINK_LOST = MAR_FLAG_LINK_LOST       # the setpoints' descriptor is gone (EIO...): every node silent, latched
+FLAG_STOPPING = MAR_FLAG_STOPPING         # a stop ramp drives the commands: its acceleration bound is on the drives
 FAULT_CONTINUE = MAR_FAULT_CONTINUE       # enum mar_fault_reaction: [faults] silent_node
 FAULT_STOP = MAR_FAULT_STOP
 FAULT_HOLD = MAR_FAULT_HOLD

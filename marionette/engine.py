@@ -532,7 +532,9 @@ class Engine:
 
     def stop_motion(self) -> None:
         """Decelerate every axis to rest at its acceleration limit (the e-stop
-        ramp; also aborts a move), then hold. blend_in() resumes the show."""
+        ramp; also aborts a move), then hold: each drive brakes from where
+        the commands already sent will have taken it (docs/architecture.md,
+        Stops). blend_in() resumes the show."""
         self._request(_core.REQUEST_STOP)
 
     def snapshot(self) -> Snapshot | None:
