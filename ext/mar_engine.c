@@ -456,7 +456,7 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     take_request(e);
     uint32_t silent = atomic_load_explicit(&e->silent_nodes, memory_order_relaxed);
     if (atomic_load_explicit(&e->sink.gone, memory_order_relaxed)) {
-        flags |= MAR_FLAG_LINK_LOST;    /* the previous tick's write() found the link gone */
+        flags |= MAR_FLAG_LINK_LOST;    /* a write found the link gone: the tick's own, or the sender's */
         silent = ~0u;
     }
     flags |= react_to_faults(e, silent) | (silent ? MAR_FLAG_NODE_SILENT : 0u);

@@ -97,9 +97,10 @@ enum mar_request {
                                   * overrun threshold): the stop ramp, then hold; latched to the end */
 #define MAR_FLAG_FAULT_HOLD 512u /* the show holds for a silent node (MAR_FAULT_HOLD) until every node answers */
 #define MAR_FLAG_OVERRUNS 1024u /* the real-time overruns reached max_overruns (then also FAULT_STOP); latched */
-#define MAR_FLAG_LINK_LOST 2048u /* the setpoints' descriptor is gone (write() failed for good, e.g. EIO: the
-                                  * pty's other end closed, a USB adapter unplugged): every node counts as
-                                  * silent from the next tick on (also MAR_FLAG_NODE_SILENT); latched */
+#define MAR_FLAG_LINK_LOST 2048u /* the link is gone (write() failed for good, e.g. EIO: the pty's other end
+                                  * closed, a USB adapter unplugged; or mar_sink_set_gone from a sender
+                                  * outside the tick): every node counts as silent from the next tick on
+                                  * (also MAR_FLAG_NODE_SILENT); latched */
 #define MAR_FLAG_STOPPING 4096u /* a stop ramp drives the commands (also MAR_FLAG_MOVING): the drives brake
                                  * at their limits from their predicted motion, and the acceleration
                                  * bound acts on that motion, not on the commands (docs/architecture.md) */
@@ -158,8 +159,8 @@ int mar_engine_push_loudness(mar_engine *e, double value);   /* one 20 ms frame,
 int mar_engine_push_frame(mar_engine *e, double value, double onset);
 /* alarms: bit i, the i-th node is silent or faulted (copied into every
  * record's node_alarms); silent: the nodes among them that are silent. The
- * next tick applies on_silent_node when silent is not 0 (or when the sink's
- * descriptor is gone: MAR_FLAG_LINK_LOST, found by the tick itself). */
+ * next tick applies on_silent_node when silent is not 0 (or when the link is
+ * gone, mar_sink.gone: MAR_FLAG_LINK_LOST). */
 void mar_engine_set_node_alarms(mar_engine *e, uint32_t alarms, uint32_t silent);
 /* The live music's source is lost (a sound card's stream failed or went
  * silent). Latched from the next tick to the end: every record carries

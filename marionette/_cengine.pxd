@@ -44,6 +44,8 @@ cdef extern from "mar_sink.h" nogil:
         size_t frame_cap
     int mar_sink_set(mar_sink *s, int kind, int fd, size_t ring_slots, int protocol)
     int mar_sink_set_poll(mar_sink *s, int one_per_tick)
+    int mar_sink_receiver_gone(int err)
+    void mar_sink_set_gone(mar_sink *s, int err)
     size_t mar_ring_pop(mar_ring *r, void *dst, size_t max_items)
 
 

@@ -416,6 +416,9 @@ class Engine:
         if self._writer is not None:
             for frame in self._core.drain_frames(FRAME_SLOTS):
                 self._writer.write(frame)
+            gone = getattr(self._writer, "gone", 0)     # a link whose writes fail for good (CanLink)
+            if gone:
+                self._core.link_gone(gone)
 
     def _drain_loop(self) -> None:
         # Waits on the event between drains, so stop() wakes it at once.

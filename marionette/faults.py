@@ -72,7 +72,7 @@ class FaultWatcher:
             before = flags
             at = f"tick {tick} ({tick * self.period:.2f} s)"
             if new & _core.FLAG_NODE_SILENT:
-                who = ("the link to the servo nodes is gone (the tick's write() failed for good) "
+                who = ("the link to the servo nodes is gone (its writes fail for good) "
                        f"at {at}: every node silent" if new & _core.FLAG_LINK_LOST
                        else f"{silent_names(self.engine)} silent at {at}")
                 self._say(f"{who}: silent_node = {self.reaction}: {REACTIONS[self.reaction]}")
@@ -127,7 +127,7 @@ def summary(records: np.ndarray, config, overruns: int) -> tuple[list[str], int]
         lost = np.nonzero(flags & _core.FLAG_LINK_LOST)[0]
         if len(lost):
             lines.append(f"  faults: the link to the servo nodes gone at tick {int(records['tick'][lost[0]])} "
-                         f"({lost[0] * period:.2f} s; the tick's write() failed for good)")
+                         f"({lost[0] * period:.2f} s; its writes fail for good)")
         lines.append(f"  faults: a node silent from tick {int(records['tick'][k])} "
                      f"({k * period:.2f} s), {len(silent)} ticks in all; silent_node = "
                      f"{faults.silent_node}: {REACTIONS[faults.silent_node]}")
