@@ -20,6 +20,8 @@ struct mar_engine {
     double *cmd;                    /* last command per axis [unit] */
     double *vel;                    /* its velocity [unit/s] */
     double *excess;                 /* per axis: target - command where the limits acted, else 0 [unit] */
+    mar_lag *drive;                 /* per axis: the drive's predicted motion when this tick's command
+                                     * takes effect (its lag applied to the commands sent) */
 
     /* tick thread only */
     double position;                /* p [show ticks] */
@@ -134,13 +136,14 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
     e->cmd = malloc(n_axes * sizeof(double));
     e->vel = calloc(n_axes, sizeof(double));
     e->excess = calloc(n_axes, sizeof(double));
+    e->drive = calloc(n_axes, sizeof *e->drive);
     e->snap_cmd = calloc(n_axes, sizeof(double));
     e->moves = calloc(n_axes, sizeof *e->moves);
     e->request_copy = calloc(n_axes, sizeof(double));
     e->request_targets = calloc(n_axes, sizeof(double));
     mar_axis_address *addr = malloc(n_axes * sizeof *addr);
     int ok = e->axes && e->show && e->loudness && e->lead_s && e->feed_forward && e->cmd
-          && e->vel && e->excess && e->snap_cmd && e->moves && e->request_copy && e->request_targets && addr;
+          && e->vel && e->excess && e->drive && e->snap_cmd && e->moves && e->request_copy && e->request_targets && addr;
     if (ok) {
         memcpy(e->axes, axes, n_axes * sizeof *axes);
         memcpy(e->show, show, n_axes * n_ticks * sizeof *show);
@@ -153,6 +156,9 @@ mar_engine *mar_engine_create(const mar_engine_options *opt, const mar_axis *axe
                          : a->dead_time;
             e->feed_forward[j] = opt->lead_mode == MAR_LEAD_DEAD_TIME_LAG ? a->time_constant : 0.0;
             e->cmd[j] = a->start;
+            /* the lag the lead inverts (none: the drive is taken to follow its command) */
+            e->drive[j] = (mar_lag){.tau = e->feed_forward[j], .vmax = a->limits.max_speed,
+                                    .period = opt->period, .y = a->start, .v = 0.0};
             addr[j] = a->address;
         }
         *status = mar_sink_init(&e->sink, n_axes, addr);
@@ -207,6 +213,7 @@ void mar_engine_destroy(mar_engine *e)
     free(e->cmd);
     free(e->vel);
     free(e->excess);
+    free(e->drive);
     free(e->snap_cmd);
     free(e->moves);
     free(e->request_copy);
@@ -300,15 +307,27 @@ static double show_target(const mar_engine *e, size_t j, double p, double r)
     return x + e->feed_forward[j] * slope * r / T;
 }
 
-/* Plan every axis's move from its present command and velocity: to the
- * request's pose (GOTO), to the show's pose at blend_position [show ticks]
- * (BLEND), or to rest (STOP); sync: all arrive together. */
+/* The servos' motion when this tick's command takes effect: the previous
+ * command, held for elapsed_periods, moved each lag (its dead time only
+ * shifts it in time). */
+static void predict_motion(mar_engine *e, int64_t elapsed_periods)
+{
+    for (size_t j = 0; j < e->n_axes; j++)
+        mar_lag_hold(&e->drive[j], e->cmd[j], elapsed_periods);
+}
+
+/* Plan every axis's move: to the request's pose (GOTO) or to the show's
+ * pose at blend_position [show ticks] (BLEND) from its present command and
+ * velocity, sync: all arrive together; or to rest (STOP): the servo's
+ * predicted motion brakes at the acceleration limit, and the commands
+ * (move_target) invert the lag to make it do so. */
 static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
 {
     double longest = 0.0;
     for (size_t j = 0; j < e->n_axes; j++) {
         const mar_limits *l = &e->axes[j].limits;
-        double x0 = e->cmd[j], v0 = e->vel[j];
+        int stop = kind == MAR_REQ_STOP;
+        double x0 = stop ? e->drive[j].y : e->cmd[j], v0 = stop ? e->drive[j].v : e->vel[j];
         double target = kind == MAR_REQ_BLEND ? show_target(e, j, blend_position, e->rate)
                       : kind == MAR_REQ_GOTO ? e->request_copy[j] : NAN;
         if (!isfinite(target))                          /* stop where braking ends */
@@ -328,7 +347,33 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
     e->mode = MAR_MODE_MOVE;
     e->move_kind = kind;
     e->move_time = 0.0;
-    e->move_duration = longest;
+    /* a stop's commands lead its profile by a tick (move_target): they
+     * reach rest one tick after it, and their velocity 0 one tick later */
+    e->move_duration = kind == MAR_REQ_STOP ? longest + 2.0 * e->opt.period : longest;
+}
+
+/* Axis j's target in mode MOVE at move_time t [s]: the profile, or for a
+ * stop the command that moves the drive from where it will be (the profile
+ * at t - T, where its first command finds it) to the profile at t. */
+static double move_target(const mar_engine *e, size_t j, double t)
+{
+    double v, x = mar_move_eval(&e->moves[j], t, &v);
+    const mar_lag *d = &e->drive[j];
+    if (e->move_kind != MAR_REQ_STOP || d->tau <= 0.0)
+        return x;
+    mar_lag from = *d;
+    from.y = mar_move_eval(&e->moves[j], t - e->opt.period, &v);
+    return mar_lag_input(&from, x - from.y);
+}
+
+/* For a stop: the command velocities [unit/s] that change the drive's
+ * predicted velocity by at most max_accel * T (accel[0], accel[1]). */
+static void drive_accel_window(const mar_engine *e, size_t j, double accel[2])
+{
+    const mar_lag *d = &e->drive[j];
+    double T = e->opt.period, aT = e->axes[j].limits.max_accel * T;   /* [unit/s] */
+    accel[0] = (mar_lag_input(d, (d->v - aT) * T) - e->cmd[j]) / T;
+    accel[1] = (mar_lag_input(d, (d->v + aT) * T) - e->cmd[j]) / T;
 }
 
 /* The fault reactions, after the operator's request of this tick (a fault
@@ -379,8 +424,9 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     uint32_t flags = 0;
 
     /* 1. playback clock: advance by the rate in force since the last tick,
-     *    then take requests. Missed periods still count (real time). The
-     *    clock waits while moves or a hold drive the figure. */
+     *    then predict the servos' motion and take requests. Missed periods
+     *    still count (real time). The clock waits while moves or a hold
+     *    drive the figure. */
     if (!e->source_lost && atomic_load_explicit(&e->source_lost_request, memory_order_acquire))
         e->source_lost = 1;
     int seek = atomic_exchange_explicit(&e->seek_pending, 0, memory_order_acquire);
@@ -407,10 +453,11 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         e->bad_input_seen = bad;
         flags |= MAR_FLAG_BAD_INPUT;
     }
+    predict_motion(e, elapsed_periods);
     take_request(e);
     uint32_t silent = atomic_load_explicit(&e->silent_nodes, memory_order_relaxed);
     if (atomic_load_explicit(&e->sink.gone, memory_order_relaxed)) {
-        flags |= MAR_FLAG_LINK_LOST;    /* the previous tick's write() found the link gone */
+        flags |= MAR_FLAG_LINK_LOST;    /* a write found the link gone: the tick's own, or the sender's */
         silent = ~0u;
     }
     flags |= react_to_faults(e, silent) | (silent ? MAR_FLAG_NODE_SILENT : 0u);
@@ -430,16 +477,21 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
      *    move's profile, or the held pose; then the hard limits */
     const double p = e->position, r = e->rate;
     uint32_t limited = 0;
+    int stopping = e->mode == MAR_MODE_MOVE && e->move_kind == MAR_REQ_STOP;
     for (size_t j = 0; j < e->n_axes; j++) {
-        double target, v;
+        double target;
         if (e->mode == MAR_MODE_SHOW)
             target = show_target(e, j, p, r);
         else if (e->mode == MAR_MODE_MOVE)
-            target = mar_move_eval(&e->moves[j], e->move_time, &v);
+            target = move_target(e, j, e->move_time);
         else
             target = e->cmd[j];
         int hit;
-        e->cmd[j] = mar_limit_step(&e->axes[j].limits, T, e->cmd[j], e->vel[j], target, &e->vel[j], &hit);
+        double accel[2];
+        if (stopping)
+            drive_accel_window(e, j, accel);
+        e->cmd[j] = mar_limit_step(&e->axes[j].limits, T, e->cmd[j], e->vel[j], target,
+                                   stopping ? accel : NULL, &e->vel[j], &hit);
         e->excess[j] = hit ? target - e->cmd[j] : 0.0;
         limited += (uint32_t)hit;
     }
@@ -451,6 +503,8 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         flags |= MAR_FLAG_SOURCE_LOST;
     e->was_playing = e->mode == MAR_MODE_SHOW;
     flags |= e->mode == MAR_MODE_MOVE ? MAR_FLAG_MOVING : e->mode == MAR_MODE_HOLD ? MAR_FLAG_HOLDING : 0u;
+    if (stopping)
+        flags |= MAR_FLAG_STOPPING;
     if (e->mode == MAR_MODE_MOVE && e->move_time >= e->move_duration)  /* arrived: next tick */
         e->mode = e->move_kind == MAR_REQ_BLEND ? MAR_MODE_SHOW : MAR_MODE_HOLD;
 

@@ -12,6 +12,7 @@
 
 #include "mar_follow.h"
 #include "mar_hist.h"
+#include "mar_lag.h"
 #include "mar_limits.h"
 #include "mar_move.h"
 #include "mar_ring.h"
@@ -82,7 +83,8 @@ enum mar_mode {
 enum mar_request {
     MAR_REQ_GOTO = 1,           /* move to the given pose, then hold; NaN targets: stop where possible */
     MAR_REQ_BLEND = 2,          /* move to the show's pose at the playback position, then play */
-    MAR_REQ_STOP = 3,           /* decelerate to rest at the acceleration limit (e-stop ramp), then hold */
+    MAR_REQ_STOP = 3,           /* each drive, from its predicted motion, to rest at its acceleration limit
+                                 * (the stop ramp), then hold */
 };
 
 /* Flags in a record. */
@@ -98,9 +100,13 @@ enum mar_request {
                                   * overrun threshold): the stop ramp, then hold; latched to the end */
 #define MAR_FLAG_FAULT_HOLD 512u /* the show holds for a silent node (MAR_FAULT_HOLD) until every node answers */
 #define MAR_FLAG_OVERRUNS 1024u /* the real-time overruns reached max_overruns (then also FAULT_STOP); latched */
-#define MAR_FLAG_LINK_LOST 2048u /* the setpoints' descriptor is gone (write() failed for good, e.g. EIO: the
-                                  * pty's other end closed, a USB adapter unplugged): every node counts as
-                                  * silent from the next tick on (also MAR_FLAG_NODE_SILENT); latched */
+#define MAR_FLAG_LINK_LOST 2048u /* the link is gone (write() failed for good, e.g. EIO: the pty's other end
+                                  * closed, a USB adapter unplugged; or mar_sink_set_gone from a sender
+                                  * outside the tick): every node counts as silent from the next tick on
+                                  * (also MAR_FLAG_NODE_SILENT); latched */
+#define MAR_FLAG_STOPPING 4096u /* a stop ramp drives the commands (also MAR_FLAG_MOVING): the drives brake
+                                 * at their limits from their predicted motion, and the acceleration
+                                 * bound acts on that motion, not on the commands (docs/architecture.md) */
 
 /* A flight-recorder record, followed in memory by n_axes commands [unit]
  * and n_axes excesses [unit]: per axis, the target the limits did not let
@@ -160,8 +166,8 @@ int mar_engine_push_frame(mar_engine *e, double value, double onset);
 int mar_engine_push_bands(mar_engine *e, double value, double onset, const double *bands, size_t n_bands);
 /* alarms: bit i, the i-th node is silent or faulted (copied into every
  * record's node_alarms); silent: the nodes among them that are silent. The
- * next tick applies on_silent_node when silent is not 0 (or when the sink's
- * descriptor is gone: MAR_FLAG_LINK_LOST, found by the tick itself). */
+ * next tick applies on_silent_node when silent is not 0 (or when the link is
+ * gone, mar_sink.gone: MAR_FLAG_LINK_LOST). */
 void mar_engine_set_node_alarms(mar_engine *e, uint32_t alarms, uint32_t silent);
 /* The live music's source is lost (a sound card's stream failed or went
  * silent). Latched from the next tick to the end: every record carries

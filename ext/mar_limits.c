@@ -12,14 +12,15 @@ double mar_brake_speed(double distance, double a, double T)
 }
 
 double mar_limit_step(const mar_limits *lim, double T, double x0, double v0,
-                      double target, double *v1, int *limited)
+                      double target, const double accel[2], double *v1, int *limited)
 {
     double vmax = lim->max_speed, aT = lim->max_accel * T;
     double hi = vmax, lo = -vmax;
-    if (v0 + aT < hi)
-        hi = v0 + aT;
-    if (v0 - aT > lo)
-        lo = v0 - aT;
+    double a_hi = accel ? accel[1] : v0 + aT, a_lo = accel ? accel[0] : v0 - aT;
+    if (a_hi < hi)
+        hi = a_hi;
+    if (a_lo > lo)
+        lo = a_lo;
     double up = mar_brake_speed(lim->pos_max - x0, lim->max_accel, T);
     double down = mar_brake_speed(x0 - lim->pos_min, lim->max_accel, T);
     if (up < hi)

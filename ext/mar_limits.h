@@ -23,8 +23,10 @@ double mar_brake_speed(double distance, double max_accel, double period);
 
 /* Next command [unit] towards target from command x0 moving at v0 [unit/s].
  * Writes the resulting velocity [unit/s] to *v1; returns the command.
- * *limited is set to 1 when the target could not be followed exactly. */
+ * *limited is set to 1 when the target could not be followed exactly.
+ * accel: the command velocities [unit/s] the acceleration bound allows,
+ * {lo, hi}; NULL: v0 -+ max_accel * period, the bound on the command itself. */
 double mar_limit_step(const mar_limits *lim, double period, double x0, double v0,
-                      double target, double *v1, int *limited);
+                      double target, const double accel[2], double *v1, int *limited);
 
 #endif

@@ -167,9 +167,7 @@ int32_t mar_counts(const mar_axis_address *a, double position)
     return (int32_t)c;
 }
 
-/* A write() error that no later write() will cure: the device, the pty's
- * other end or the connection is gone (a full buffer, EAGAIN or ENOBUFS, is not). */
-static int receiver_gone(int err)
+int mar_sink_receiver_gone(int err)
 {
     return err == EIO || err == ENXIO || err == ENODEV || err == EBADF || err == EPIPE
         || err == ECONNRESET || err == ENOTCONN || err == ENETDOWN;
@@ -188,13 +186,19 @@ static int write_out(mar_sink *s, size_t len)
         if (w != (ssize_t)step) {
             all = 0;
             if (w < 0 && errno != EAGAIN) { /* the receiver is gone: no use trying the rest */
-                if (receiver_gone(errno))
-                    atomic_store_explicit(&s->gone, errno, memory_order_relaxed);
+                if (mar_sink_receiver_gone(errno))
+                    mar_sink_set_gone(s, errno);
                 break;
             }
         }
     }
     return all;
+}
+
+void mar_sink_set_gone(mar_sink *s, int err)
+{
+    int none = 0;
+    atomic_compare_exchange_strong_explicit(&s->gone, &none, err, memory_order_relaxed, memory_order_relaxed);
 }
 
 void mar_sink_emit(mar_sink *s, uint32_t tick, const double *command)

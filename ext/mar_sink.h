@@ -98,6 +98,17 @@ int mar_sink_set(mar_sink *s, int kind, int fd, size_t ring_slots, int protocol)
 /* Device counts of a position, rounded and saturated to int32. */
 int32_t mar_counts(const mar_axis_address *a, double position);
 
+/* 1 when a write() error (an errno) is one no later write() will cure: the
+ * device, the pty's other end or the connection is gone (a full buffer,
+ * EAGAIN or ENOBUFS, is not). */
+int mar_sink_receiver_gone(int err);
+
+/* The receiver is gone (err, an errno, not 0): latched in gone, so the next
+ * tick counts every node silent. The tick's own write() sets it; so does a
+ * sender outside the tick (the Python thread that hands CAN frames to
+ * python-can) when the link's writes fail for good. */
+void mar_sink_set_gone(mar_sink *s, int err);
+
 /* Encode and hand on one tick's commands [unit]. Never blocks. */
 void mar_sink_emit(mar_sink *s, uint32_t tick, const double *command);
 

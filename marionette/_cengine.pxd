@@ -44,6 +44,8 @@ cdef extern from "mar_sink.h" nogil:
         size_t frame_cap
     int mar_sink_set(mar_sink *s, int kind, int fd, size_t ring_slots, int protocol)
     int mar_sink_set_poll(mar_sink *s, int one_per_tick)
+    int mar_sink_receiver_gone(int err)
+    void mar_sink_set_gone(mar_sink *s, int err)
     size_t mar_ring_pop(mar_ring *r, void *dst, size_t max_items)
 
 
@@ -76,6 +78,7 @@ cdef extern from "mar_engine.h" nogil:
         MAR_FLAG_FAULT_HOLD
         MAR_FLAG_OVERRUNS
         MAR_FLAG_LINK_LOST
+        MAR_FLAG_STOPPING
     enum mar_fault_reaction:
         MAR_FAULT_CONTINUE
         MAR_FAULT_STOP

@@ -40,7 +40,8 @@ FLAG_NODE_SILENT = MAR_FLAG_NODE_SILENT   # a servo node is silent this tick
 FLAG_FAULT_STOP = MAR_FLAG_FAULT_STOP     # a fault stopped the show (stop ramp, then hold), latched
 FLAG_FAULT_HOLD = MAR_FLAG_FAULT_HOLD     # the show holds for a silent node until every node answers
 FLAG_OVERRUNS = MAR_FLAG_OVERRUNS         # the overrun threshold was reached (with FAULT_STOP), latched
-FLAG_LINK_LOST = MAR_FLAG_LINK_LOST       # the setpoints' descriptor is gone (EIO...): every node silent, latched
+FLAG_LINK_LOST = MAR_FLAG_LINK_LOST       # the link is gone (EIO...): every node silent, latched
+FLAG_STOPPING = MAR_FLAG_STOPPING         # a stop ramp drives the commands: its acceleration bound is on the drives
 FAULT_CONTINUE = MAR_FAULT_CONTINUE       # enum mar_fault_reaction: [faults] silent_node
 FAULT_STOP = MAR_FAULT_STOP
 FAULT_HOLD = MAR_FAULT_HOLD
@@ -228,6 +229,11 @@ cdef class CoreEngine:
         """The live source is lost: latched from the next tick (FLAG_SOURCE_LOST)."""
         mar_engine_source_lost(self.engine)
 
+    def link_gone(self, int err):
+        """The link's writes fail for good (err: an errno): every node silent
+        from the next tick on (FLAG_LINK_LOST), as when the tick's own write() fails."""
+        mar_sink_set_gone(mar_engine_sink(self.engine), err)
+
     def request(self, int kind, targets=None, bint synchronized=False):
         """Move request (REQUEST_*); targets: n_axes positions [unit] for REQUEST_GOTO."""
         cdef cnp.ndarray[cnp.float64_t, ndim=1, mode="c"] t = np.ascontiguousarray(
@@ -303,6 +309,11 @@ cdef class CoreEngine:
         width = np.array([mar_hist_width(i) for i in range(MAR_HIST_BINS)], dtype=np.int64)
         counts = np.array([mar_hist_bin(h, i) for i in range(MAR_HIST_BINS)], dtype=np.uint64)
         return lower, width, counts, mar_hist_max(h)
+
+
+def receiver_gone(int err):
+    """True when a write's errno says the link is gone for good (ext/mar_sink.h)."""
+    return mar_sink_receiver_gone(err) != 0
 
 
 def plan_move(double x0, double v0, double target, double max_speed, double max_accel,

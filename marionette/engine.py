@@ -418,6 +418,9 @@ class Engine:
         if self._writer is not None:
             for frame in self._core.drain_frames(FRAME_SLOTS):
                 self._writer.write(frame)
+            gone = getattr(self._writer, "gone", 0)     # a link whose writes fail for good (CanLink)
+            if gone:
+                self._core.link_gone(gone)
 
     def _drain_loop(self) -> None:
         # Waits on the event between drains, so stop() wakes it at once.
@@ -537,7 +540,9 @@ class Engine:
 
     def stop_motion(self) -> None:
         """Decelerate every axis to rest at its acceleration limit (the e-stop
-        ramp; also aborts a move), then hold. blend_in() resumes the show."""
+        ramp; also aborts a move), then hold: each drive brakes from where
+        the commands already sent will have taken it (docs/architecture.md,
+        Stops). blend_in() resumes the show."""
         self._request(_core.REQUEST_STOP)
 
     def snapshot(self) -> Snapshot | None:

@@ -72,7 +72,7 @@ class FaultWatcher:
             before = flags
             at = f"tick {tick} ({tick * self.period:.2f} s)"
             if new & _core.FLAG_NODE_SILENT:
-                who = ("the link to the servo nodes is gone (the tick's write() failed for good) "
+                who = ("the link to the servo nodes is gone (its writes fail for good) "
                        f"at {at}: every node silent" if new & _core.FLAG_LINK_LOST
                        else f"{silent_names(self.engine)} silent at {at}")
                 self._say(f"{who}: silent_node = {self.reaction}: {REACTIONS[self.reaction]}")
@@ -88,15 +88,25 @@ class FaultWatcher:
 def rest_after(records: np.ndarray, config, start: int) -> tuple[int | None, float]:
     """From record index start: (records until every command is at rest for
     good, None if it never is; the time the limits allow [s]: the slowest
-    axis's speed at start over its top acceleration)."""
+    axis's speed before start over its top acceleration). The stop ramp
+    brakes each drive from its own speed, which its lag makes an average
+    of its commands' past speeds: the higher of the two counts. The ramp's
+    commands lead the drive by a tick and take one more to step back to
+    rest, so they rest two ticks after it."""
     cmd = records["command"]
     period = config.tick_period
-    start = max(start, 1)
+    start = max(start, 2)
     step = np.abs(np.diff(cmd[start - 1:], axis=0)).max(axis=1)   # [unit/tick] into records start..
     moving = np.nonzero(step > REST_TOLERANCE)[0]
     rest = 0 if len(moving) == 0 else int(moving[-1]) + 1
     rest = None if rest >= len(step) else rest
-    speed = np.abs(cmd[start] - cmd[start - 1]) / period                  # [unit/s] per axis
+    tau = np.array([a.time_constant for a in config.axes])             # [s]
+    alpha = -np.expm1(-period / np.maximum(tau, 1e-300))               # share of the gap a tick closes
+    memory = int(np.ceil(10 * tau.max() / period)) + 2                 # [ticks] the lag remembers
+    drive = np.zeros(len(tau))                                         # [unit/s]
+    for v in np.diff(cmd[max(0, start - memory):start], axis=0) / period:
+        drive += alpha * (v - drive)
+    speed = np.maximum(np.abs(cmd[start - 1] - cmd[start - 2]) / period, np.abs(drive))   # [unit/s]
     allowed = max(s / a.max_accel for s, a in zip(speed, config.axes))
     return rest, float(allowed)
 
@@ -117,7 +127,7 @@ def summary(records: np.ndarray, config, overruns: int) -> tuple[list[str], int]
         lost = np.nonzero(flags & _core.FLAG_LINK_LOST)[0]
         if len(lost):
             lines.append(f"  faults: the link to the servo nodes gone at tick {int(records['tick'][lost[0]])} "
-                         f"({lost[0] * period:.2f} s; the tick's write() failed for good)")
+                         f"({lost[0] * period:.2f} s; its writes fail for good)")
         lines.append(f"  faults: a node silent from tick {int(records['tick'][k])} "
                      f"({k * period:.2f} s), {len(silent)} ticks in all; silent_node = "
                      f"{faults.silent_node}: {REACTIONS[faults.silent_node]}")

@@ -6,13 +6,14 @@ import time
 import can
 import numpy as np
 
-from marionette import protocol
+from marionette import _core, protocol
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
 from marionette.show import load_show
 from marionette.sim.figure import SimFigure
 from marionette.transport import LinkError, open_link
+from marionette.transport.can_link import FAILED_TICKS
 
 
 class VirtualNodes(threading.Thread):
@@ -68,6 +69,38 @@ def test_engine_over_a_virtual_can_bus_in_one_process():
     assert monitor.nodes[1].positions == tuple(int(c) for c in last)
     assert len(node1) == len(last)
     assert records["tick"][-1] == 39
+
+
+def test_a_bus_whose_sends_all_fail_is_gone_after_three_ticks():
+    """python-can's virtual bus, shut down under the link (every send then
+    raises CanOperationError, without an errno): after FAILED_TICKS ticks
+    whose every frame failed the link is gone, and the next tick counts
+    every node silent and stops the figure (the default silent_node)."""
+    config = load_config(None)
+    show = load_show(DEMO_SHOW, config)
+    nodes = VirtualNodes(config, "marionette-gone")
+    nodes.start()
+    link = open_link("can:virtual:marionette-gone")
+    try:
+        with Engine(config, show, output=link, record=True) as engine:
+            for _ in range(20):
+                engine.step(1)
+                time.sleep(0.005)
+            link.bus.shutdown()                     # the bus is gone
+            for _ in range(10):
+                engine.step(1)
+            records = engine.records()
+    finally:
+        link.close()
+        nodes.stop.set()
+        nodes.join()
+    flags = records["flags"]
+    lost = (flags & _core.FLAG_LINK_LOST) != 0
+    first = int(np.argmax(lost))
+    print(f"gone: every send fails from tick 20, the tick reacts at tick {first}")
+    assert first == 20 + FAILED_TICKS and np.all(lost[first:]), np.nonzero(lost)[0]
+    assert np.all(flags[first:] & _core.FLAG_NODE_SILENT) and np.all(flags[first:] & _core.FLAG_FAULT_STOP)
+    assert link.gone and link.send_errors > 0
 
 
 def test_open_link_refuses_bad_descriptions():

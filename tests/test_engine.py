@@ -15,12 +15,17 @@ from marionette.recorder import read_flight_record
 from conftest import make_figure, make_show, smooth_dance
 
 
-def check_limits(config, commands, start):
-    """Every command within position, speed and acceleration limits (1e-9 relative)."""
+def check_limits(config, commands, start, stopping=None):
+    """Every command within position, speed and acceleration limits (1e-9
+    relative); stopping: ticks of a stop ramp (FLAG_STOPPING), whose
+    acceleration bound acts on the drives' predicted motion instead (checked
+    by ext/tests/test_engine.c and tests/sim/test_stops.py)."""
     T = config.tick_period
     x = np.vstack([start, commands])                        # [unit], row per tick
     v = np.diff(x, axis=0) / T                              # [unit/s]
     a = np.diff(np.vstack([np.zeros(len(start)), v]), axis=0) / T
+    if stopping is not None:
+        a[np.asarray(stopping, dtype=bool)] = 0.0
     for j, axis in enumerate(config.axes):
         tol = 1e-9 * max(1.0, abs(axis.min), abs(axis.max))
         assert np.all(x[:, j] >= axis.min - tol) and np.all(x[:, j] <= axis.max + tol), axis.name

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from conftest import figure_dict, make_figure, make_show
+from test_engine import check_limits
 from marionette import _core, faults
 from marionette.config import FaultConfig, config_from_dict
 from marionette.engine import Engine
@@ -66,11 +67,9 @@ def test_a_silent_node_in_step_mode_and_the_summary(reaction):
     rest, allowed = faults.rest_after(records, config, 100)
     assert rest is not None and rest * config.tick_period <= allowed + 2 * config.tick_period
     assert f"every axis at rest {rest * config.tick_period:.2f} s later" in lines[1]
-    cmd = records["command"]
-    for j, a in enumerate(config.axes):
-        assert a.min <= cmd[:, j].min() and cmd[:, j].max() <= a.max
-        accel = np.diff(cmd[99:, j], 2) / config.tick_period ** 2
-        assert np.all(np.abs(accel) <= a.max_accel * (1 + 1e-9))
+    stopping = (flags & _core.FLAG_STOPPING) != 0
+    assert stopping[100] and not np.any(stopping[:100])           # the stop ramp, planned at once
+    check_limits(config, records["command"], engine.show.positions[:, 0], stopping=stopping)
 
 
 def test_hold_blends_back_in_when_the_node_answers_and_ends_clean():

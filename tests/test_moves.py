@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from marionette import Engine
-from marionette._core import FLAG_HOLDING, FLAG_MOVING, plan_move
+from marionette._core import FLAG_HOLDING, FLAG_MOVING, FLAG_STOPPING, plan_move
 
 from conftest import make_figure, make_show, smooth_dance
 from test_engine import check_limits
@@ -150,7 +150,8 @@ def test_retarget_and_abort_while_the_loop_runs(rng):
             time.sleep(0.05)
         engine.stop()
         r = engine.records()
-    check_limits(config, r["command"], show.positions[:, 0])
+    assert np.any(r["flags"] & FLAG_STOPPING)
+    check_limits(config, r["command"], show.positions[:, 0], stopping=r["flags"] & FLAG_STOPPING)
     np.testing.assert_array_equal(r["command"][-1], 0.0)
 
 

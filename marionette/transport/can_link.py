@@ -7,17 +7,39 @@ sender thread hands them to bus.send(); on SocketCAN the tick writes them
 to the socket itself. Status, heartbeat and EMCY frames
 coming back are decoded by the C codec on a receive thread and handed to a
 NodeMonitor.
+
+A bus that is gone is noticed by its reads or writes: an error that says
+so for good (an errno such as EIO: slcan's pty or USB adapter gone), or
+every frame of FAILED_TICKS ticks refused (a bus with no node to acknowledge).
+Then `gone` holds the errno, and the engine's sender tells the tick, which
+counts every node silent at once, as it does when its own write() to a
+serial link fails.
 """
 from __future__ import annotations
 
+import errno
 import threading
+import time
 
 import can
 
-from marionette import protocol
-from marionette.transport.node_monitor import NodeMonitor
+from marionette import _core, protocol
+from marionette.transport.node_monitor import SILENT_AFTER_TICKS, NodeMonitor
 
 RECV_TIMEOUT = 0.01         # receive thread poll [s]
+FAILED_TICKS = SILENT_AFTER_TICKS   # ticks whose every frame failed: the bus is gone [ticks]
+
+
+def _errno(exc: BaseException) -> int:
+    """The errno behind a python-can error (its cause or context, e.g. the
+    OSError under pyserial's SerialException), 0 if none."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError) and exc.errno:
+            return exc.errno
+        exc = exc.__cause__ or exc.__context__
+    return 0
 
 
 class CanLink:
@@ -43,6 +65,8 @@ class CanLink:
         self.decoder = protocol.CanDecoder()    # also fed our own SYNCs: it unwraps STATUS ticks
         self._decoder_lock = threading.Lock()
         self.send_errors = 0
+        self.gone = 0                       # errno once the bus is gone for good (latched)
+        self._failed_ticks = 0              # ticks in a row whose every frame failed
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
 
@@ -56,18 +80,29 @@ class CanLink:
         return None
 
     def write(self, records: bytes) -> None:
-        """Send the CAN frames of one or more ticks taken from the engine's ring."""
-        for can_id, data in protocol.can_records(records):
-            self.send_frame(can_id, data)
+        """Send the CAN frames of a tick taken from the engine's ring."""
+        sent = [self.send_frame(can_id, data) for can_id, data in protocol.can_records(records)]
+        self._failed_ticks = 0 if any(sent) else self._failed_ticks + 1
+        if self._failed_ticks >= FAILED_TICKS and not self.gone:
+            self.gone = errno.EIO
 
-    def send_frame(self, can_id: int, data: bytes) -> None:
+    def send_frame(self, can_id: int, data: bytes) -> bool:
+        """True if python-can took the frame."""
         if can_id == protocol.CAN_SYNC:
             with self._decoder_lock:
                 self.decoder.feed(can_id, data)
+        if self.gone:                       # no use: every write fails
+            self.send_errors += 1
+            return False
         try:
             self.bus.send(can.Message(arbitration_id=can_id, data=data, is_extended_id=False))
-        except can.CanError:
+            return True
+        except can.CanError as exc:
             self.send_errors += 1
+            err = _errno(exc)
+            if err and _core.receiver_gone(err):
+                self.gone = err
+            return False
 
     def send(self, message) -> None:
         """Encode and send one protocol message (ESTOP, CONFIG...)."""
@@ -83,9 +118,14 @@ class CanLink:
         while not self._stop.is_set():
             try:
                 msg = self.bus.recv(RECV_TIMEOUT)
-            except (can.CanError, OSError, ValueError):
+            except (can.CanError, OSError, ValueError) as exc:
                 if self._stop.is_set():
                     return
+                err = _errno(exc)
+                if err and _core.receiver_gone(err):    # e.g. EIO: slcan's pty or adapter gone
+                    self.gone = self.gone or err
+                    return
+                time.sleep(RECV_TIMEOUT)                # a passing error: no busy loop
                 continue
             if msg is None or msg.is_error_frame or msg.is_remote_frame or msg.is_extended_id:
                 continue
@@ -102,4 +142,8 @@ class CanLink:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(1.0)
-        self.bus.shutdown()
+        try:
+            self.bus.shutdown()
+        except (can.CanError, OSError):
+            if not self.gone:                           # a bus that is gone cannot be told
+                raise

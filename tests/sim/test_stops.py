@@ -1,14 +1,20 @@
-"""Stops planned from the servos' predicted physical state: over many random
-stops and e-stops, in the simulator whose drives do not clip acceleration,
-no axis passes the point where it comes to rest by more than 1 % of its
-range and none accelerates beyond its limit (docs/architecture.md, Stops).
-'stop': the engine's stop ramp (stop_motion) with the nodes following;
-'estop': the same with an ESTOP to every node, whose quick stop
-(ServoModel.brake) then moves the figure."""
+"""Stops in the simulator whose drives do not clip acceleration (the bare
+behaviour model: dead time and first-order lag), over many random cases.
+
+'stop': the engine's stop ramp (stop_motion: also the pause, Ctrl-C, the
+fault reactions and the end's hold), commanded mid-motion, in a random
+dance or in a move at top speed. Its stop point is where the drive itself
+comes to rest braking at its acceleration limit from its physical state
+when the ramp's first command takes effect (the setpoints inside its dead
+time and lag played out): no axis may pass it by more than 1 % of its
+range, nor stop short of it by more, nor accelerate beyond its limit
+(docs/architecture.md, Stops).
+'estop': the same with an ESTOP to every node, whose own quick stop
+(ServoModel.brake) then moves the figure; no axis may pass the point where
+it comes to rest."""
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
 from marionette import protocol
 from marionette.config import load_config
@@ -18,6 +24,12 @@ from marionette.sim.figure import SimFigure
 
 OVERSHOOT = 0.01        # of the axis's range
 ACCEL_TOL = 1.02        # peak physical acceleration / limit allowed (rounding, whole counts)
+# ... in a stop ramp from above 70 % of the top speed: a drive whose speed is
+# clipped for part of each tick (above vmax * (1 - exp(-T/tau)) * tau / T,
+# 82 % of it for the winches) changes its in-tick shape as it slows, which
+# the measure between the ticks sees as up to 16 % more (at the ticks, the limit)
+STOP_ACCEL_TOL = 1.2
+FAST = 0.7              # of the top speed
 SETTLE = 75             # ticks after the stop until the figure is judged at rest
 
 
@@ -48,12 +60,96 @@ def random_show(config, rng, ticks):
                 positions=out, loudness=np.zeros(ticks), tick_period=config.tick_period)
 
 
-def stop_run(config, show, stop_tick, kind, seed):
+def drive(config, engine, sim, ticks, on_tick):
+    """Runs the engine in step mode into sim (all on one virtual clock) for
+    ticks ticks, calling on_tick(k) before tick k. Returns the drives'
+    positions at every fine step from model time 0 [unit] (steps x axes)."""
+    T = config.tick_period
+    model = next(iter(sim.nodes.values())).model
+    per_tick = model.sample_steps
+    fine = [sim.positions()]
+    for k in range(ticks):
+        for i in range(1, per_tick + 1):                                # the drives up to tick k
+            sim.advance_to(((k - 1) * per_tick + i) * model.step if k else 0.0)
+            if k:
+                fine.append(sim.positions())
+        on_tick(k)
+        engine.step(1)
+        cmd = engine.snapshot().commands.values()
+        entries = [(a.node, a.channel, int(round(a.offset + a.scale * c))) for a, c in zip(config.axes, cmd)]
+        sim.handle(protocol.Sync(k), k * T)
+        sim.handle(protocol.Setpoints(k, entries), k * T)
+    return np.array(fine)
+
+
+def physical_stop(config, sim, fine, stop_tick):
+    """Per axis: (where the drive is when the stop's first command acts, its
+    velocity over the tick before [unit/s], where braking at its limit from
+    there ends [unit]), from the simulated drives themselves."""
+    model = next(iter(sim.nodes.values())).model
+    at = stop_tick * model.sample_steps + model.delay_steps              # [fine steps], per axis
+    cols = np.arange(len(config.axes))
+    y = fine[at, cols]
+    v = (y - fine[at - model.sample_steps, cols]) / config.tick_period
+    amax = np.array([a.max_accel for a in config.axes])
+    stop = np.clip(y + v * np.abs(v) / (2 * amax), [a.min for a in config.axes], [a.max for a in config.axes])
+    return at, v, stop
+
+
+def stop_case(config, rng, kind):
+    """One stop mid-motion: in a random dance ('dance') or in a move from
+    home to a far random pose ('move', stopped near top speed). Returns per
+    axis (how far past the stop point it went, |rest - stop point|, the
+    peak physical acceleration over the run / the limit, the speed [unit/s]
+    when the stop acted / the top speed)."""
+    sim = SimFigure(config, clip_accel=False)
+    sim.advance_to(0.0)
+    if kind == "dance":
+        show = random_show(config, rng, 160 + SETTLE)
+        stop_tick = int(rng.integers(60, 160))
+        engine = Engine(config, show)
+        request = {}
+    else:
+        show = random_show(config, rng, 2)
+        stop_tick = int(rng.integers(12, 30))
+        engine = Engine(config, show, start_pose="home")
+        pose = {a.name: float(rng.choice([a.min, a.max]) * 0.9 + 0.1 * a.home) for a in config.axes}
+        request = {0: lambda: engine.move_to(pose)}
+    request[stop_tick] = engine.stop_motion
+    with engine:
+        fine = drive(config, engine, sim, stop_tick + SETTLE, lambda k: request.get(k, lambda: None)())
+    at, v, stop = physical_stop(config, sim, fine, stop_tick)
+    after = fine[at.min():]
+    direction = np.where(v != 0, np.sign(v), 1.0)
+    over = np.max(direction * (after - stop), axis=0).clip(0)
+    rest = np.abs(after[-1] - stop)
+    span = np.array([a.max - a.min for a in config.axes])
+    limit = np.array([a.max_accel for a in config.axes])
+    vmax = np.array([a.max_speed for a in config.axes])
+    return over / span, rest / span, sim.peak_accel() / limit, np.abs(v) / vmax
+
+
+def test_stop_ramps_brake_the_drives_to_their_own_stop_point():
+    """Over 24 random stops of each kind (16 axes each), fixed seed."""
+    config = figure()
+    rng = np.random.default_rng(19)
+    results = [stop_case(config, rng, kind) for kind in ("dance", "move") for _ in range(24)]
+    over, rest, accel, speed = (np.array(r) for r in zip(*results))
+    print(f"stops: {over.size} axis-stops, speed up to {speed.max():.2f} x the top speed "
+          f"(median {np.median(speed):.2f}); past the stop point: max {100 * over.max():.3f} % of the range; "
+          f"rest off it: max {100 * rest.max():.3f} %; peak acceleration max {accel.max():.3f} x the limit")
+    assert np.sum(speed > 0.8) >= 100                   # many stops at high speed
+    assert over.max() <= OVERSHOOT, (over.max(axis=0), np.unravel_index(over.argmax(), over.shape))
+    assert rest.max() <= OVERSHOOT, rest.max(axis=0)
+    assert np.all(accel <= STOP_ACCEL_TOL), accel.max(axis=0)
+    assert np.all(accel[speed < FAST] <= ACCEL_TOL), accel[speed < FAST].max()
+
+
+def estop_run(config, show, stop_tick):
     """Plays show into a SimFigure without acceleration clipping on a
-    virtual clock; at stop_tick stop_motion() (kind 'stop') or e-stop
-    (the engine's stop and an ESTOP to every node, which arrives with the
-    tick's setpoints). Returns (positions per tick after the stop, the
-    figure's peak physical acceleration per axis)."""
+    virtual clock; at stop_tick the engine's stop and an ESTOP to every
+    node, which arrives with the tick's setpoints. Returns (positions per
+    tick after the stop, the figure's peak physical acceleration per axis)."""
     T = config.tick_period
     sim = SimFigure(config, clip_accel=False)
     sim.advance_to(0.0)
@@ -62,40 +158,34 @@ def stop_run(config, show, stop_tick, kind, seed):
         for k in range(stop_tick + SETTLE):
             if k == stop_tick:
                 engine.stop_motion()
-                sim.advance_to(k * T)
-                peak_before = sim.peak_accel()
             engine.step(1)
             cmd = engine.snapshot().commands.values()
             entries = [(a.node, a.channel, int(round(a.offset + a.scale * c)))
                        for a, c in zip(config.axes, cmd)]
             sim.handle(protocol.Sync(k), k * T)
-            if k == stop_tick and kind == "estop":
+            if k == stop_tick:
                 sim.handle(protocol.Estop(protocol.BROADCAST), k * T)
             sim.handle(protocol.Setpoints(k, entries), k * T)
             if k >= stop_tick:
                 x.append(sim.positions())
     sim.advance_to((stop_tick + SETTLE) * T)
-    return np.array(x), np.maximum(peak_before, sim.peak_accel()), peak_before
+    return np.array(x), sim.peak_accel()
 
 
-def measure(kind, cases, seed):
+def test_estops_come_to_rest_within_one_percent_and_the_acceleration_limit():
+    """Over 100 random e-stops, fixed seed."""
     config = figure()
     span = np.array([a.max - a.min for a in config.axes])
     limit = np.array([a.max_accel for a in config.axes])
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(18)
     over, accel = [], []
-    for case in range(cases):
+    for case in range(100):
         show = random_show(config, rng, 160 + SETTLE)
-        x, peak, _ = stop_run(config, show, int(rng.integers(60, 160)), kind, seed)
+        x, peak = estop_run(config, show, int(rng.integers(60, 160)))
         rest = x[-1]
         direction = np.sign(rest - x[0])
         over.append(np.max(direction * (x - rest), axis=0).clip(0) / span)
         accel.append(peak / limit)
-    return np.array(over), np.array(accel)
-
-
-@pytest.mark.parametrize("kind, cases, seed", [("stop", 40, 17), ("estop", 100, 18)])
-def test_stops_come_to_rest_within_one_percent_and_the_acceleration_limit(kind, cases, seed):
-    over, accel = measure(kind, cases, seed)
+    over, accel = np.array(over), np.array(accel)
     assert over.max() <= OVERSHOOT, (np.median(over.max(axis=1)), over.max(axis=0))
     assert np.all(accel <= ACCEL_TOL), (np.median(accel.max(axis=1)), accel.max(axis=0))
