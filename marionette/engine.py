@@ -158,6 +158,8 @@ class Engine:
         first = 0 if math.isnan(cue) else min(int(round(cue)), positions.shape[1] - 1)
         start = positions[:, first] if start_pose is None else self._pose(start_pose, fill=None)
         self.follow = follow
+        # band levels per frame the follower correlates (0: the loudness alone)
+        self.follow_bands = 0 if follow is None or self.show.bands is None else self.show.bands.shape[1]
         self._core = _core.CoreEngine(
             config.tick_period, LEAD_MODES[lead], INTERPOLATIONS[interpolation],
             axis_table(config, start), positions,
@@ -483,7 +485,10 @@ class Engine:
         and its band levels [full scale] (marionette.music.bands; None: the
         source has none); refused frames raise. A show with stored onsets
         lets the follower place its tracking peak on them; a show with
-        stored bands correlates the bands of frames that bring as many."""
+        stored bands correlates the bands of frames that bring as many
+        (follow_bands); other frames count with their loudness alone."""
+        if bands is not None and len(bands) != self.follow_bands:
+            bands = None
         status = self._core.push_loudness(float(value), float(onset), bands)
         if status == -errno.EINVAL:
             raise ArgumentError(f"live frame {value!r} (onset {onset!r}, bands {bands!r}) refused: the "

@@ -7,19 +7,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from marionette.bench.bands import level_db     # floored under each band's top, as the bench does
 from marionette.music.bands import BAND, N_BANDS, BandMeter, band_weights, bands, window_correlation
 from marionette.music.feature import FRAME_PERIOD
 from marionette.sim.music import synthesize
 from marionette.sim.tape import Deck, play
 
 T = FRAME_PERIOD
-FLOOR_DB = 30.0             # levels this far under the band's top are floored, as the bench does [dB]
 STYLES = ("pop", "waltz", "ambient", "techno")
-
-
-def level_db(x: np.ndarray) -> np.ndarray:
-    top = np.percentile(x, 99, axis=0)
-    return 20.0 * np.log10(np.maximum(x, top * 10.0 ** (-FLOOR_DB / 20.0)))
 
 
 def excerpt(style: str, seed: int, fs: float, seconds: float = 12.0) -> np.ndarray:

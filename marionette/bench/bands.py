@@ -42,7 +42,7 @@ from marionette.bench import bands_cue
 from marionette.bench._machine import describe, machine_info
 from marionette.bench.sync import PIECES, SEED, SEEDS, scenarios
 from marionette.cli.options import Number
-from marionette.music.bands import bands
+from marionette.music.bands import bands, correlations, fisher
 from marionette.music.feature import FRAME_PERIOD, loudness
 from marionette.sim.music import synthesize
 from marionette.sim.tape import play
@@ -64,25 +64,6 @@ def level_db(feature: np.ndarray) -> np.ndarray:
     x = x[:, None] if x.ndim == 1 else x
     top = np.percentile(x, 99, axis=0)
     return 20.0 * np.log10(np.maximum(x, top * 10.0 ** (-RANGE_DB / 20.0)) + 1e-12)
-
-
-def correlations(live: np.ndarray, stored: np.ndarray) -> np.ndarray:
-    """Joint correlation (as bands.window_correlation) of the window live
-    (m, bands) with stored (n, bands) at every offset 0 .. n - m."""
-    m = len(live)
-    a = live - live.mean(axis=0)
-    num = sum(np.correlate(stored[:, b], a[:, b], mode="valid") for b in range(stored.shape[1]))
-    c1 = np.vstack([np.zeros((1, stored.shape[1])), np.cumsum(stored, axis=0)])
-    c2 = np.vstack([np.zeros((1, stored.shape[1])), np.cumsum(stored ** 2, axis=0)])
-    s1, s2 = c1[m:] - c1[:-m], c2[m:] - c2[:-m]
-    var_s = np.maximum(s2 - s1 ** 2 / m, 0.0).sum(axis=1)
-    den = np.sqrt(np.sum(a * a) * var_s)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(den > 0, num / den, np.nan)
-
-
-def fisher(r):
-    return np.arctanh(np.clip(r, -0.999999, 0.999999))
 
 
 def on_stored_grid(live_db: np.ndarray, positions: np.ndarray) -> tuple[int, np.ndarray]:

@@ -31,6 +31,7 @@ import numpy as np
 
 from marionette.bench.sync import (PIECES, audible_from, onset_of, scenarios, top_variants,
                                    wrong_cue_decks)
+from marionette.music.bands import correlations
 from marionette.music.feature import FRAME_PERIOD, loudness
 from marionette.sim.tape import play
 
@@ -55,7 +56,6 @@ def along_rate(live: np.ndarray, rate: float, ages: int) -> np.ndarray:
 def cue_decision(stored: np.ndarray, live: np.ndarray, cue: int, ages: int) -> tuple[float, float, float, int]:
     """(best line's correlation, best elsewhere, its rate, its offset [frames])
     for the live frames (rows from the onset) and the cue at stored frame `cue`."""
-    from marionette.bench.bands import correlations       # (bands imports this module)
     best = (-2.0, -2.0, 1.0, 0)
     for rate in RATES:
         window = along_rate(live, rate, ages)

@@ -143,6 +143,27 @@ def fit_frames(rows: np.ndarray, n: int) -> np.ndarray:
     return np.pad(rows, ((0, n - len(rows)), (0, 0)), constant_values=np.nan)
 
 
+def correlations(live: np.ndarray, stored: np.ndarray) -> np.ndarray:
+    """Joint correlation (as bands.window_correlation) of the window live
+    (m, bands) with stored (n, bands) at every offset 0 .. n - m."""
+    m = len(live)
+    a = live - live.mean(axis=0)
+    num = sum(np.correlate(stored[:, b], a[:, b], mode="valid") for b in range(stored.shape[1]))
+    c1 = np.vstack([np.zeros((1, stored.shape[1])), np.cumsum(stored, axis=0)])
+    c2 = np.vstack([np.zeros((1, stored.shape[1])), np.cumsum(stored ** 2, axis=0)])
+    s1, s2 = c1[m:] - c1[:-m], c2[m:] - c2[:-m]
+    var_s = np.maximum(s2 - s1 ** 2 / m, 0.0).sum(axis=1)
+    den = np.sqrt(np.sum(a * a) * var_s)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, num / den, np.nan)
+
+
+def fisher(r):
+    """Fisher's z of correlations: differences of z compare correlations
+    fairly near 1."""
+    return np.arctanh(np.clip(r, -0.999999, 0.999999))
+
+
 def window_correlation(live_db: np.ndarray, stored_db: np.ndarray) -> float:
     """The joint correlation of two equally long windows of band levels [dB]
     (frames, bands): each band's mean over the window taken out (the volume

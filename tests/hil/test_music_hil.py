@@ -10,7 +10,7 @@ import pytest
 
 from hil_support import dance_from_home
 from marionette import protocol
-from marionette.music.bands import N_BANDS, BandMeter, bands
+from marionette.music.bands import N_BANDS, BandMeter, bands, fit_frames, wav_bands
 from marionette.music.feature import LoudnessMeter, read_wav, wav_loudness, write_wav
 from marionette.music.node_source import NodeLoudness
 from marionette.show import Show
@@ -27,7 +27,8 @@ BAND_TICKS = 100        # SYNCs of the band tests: 2 s
 @pytest.mark.xfail(strict=False, reason="flaky: a SYNC that reaches the simulator late makes the "
                    "node measure the wrong audio (2 of 22 runs after the cue refit of 2026-12-02; "
                    "the lock 1-2 ticks off, the first cause, is fixed); docs/music.md, known limits")
-def test_follows_music_measured_by_a_node(sim, figure, tmp_path):
+@pytest.mark.parametrize("bands", [True, False], ids=["band node", "one-band node"])
+def test_follows_music_measured_by_a_node(bands, sim, figure, tmp_path):
     # the node measures the tick period before each SYNC and answers with
     # it; the engine takes it at the next tick, one period after that
     # audio ended: the [follow] latency says so
@@ -38,10 +39,12 @@ def test_follows_music_measured_by_a_node(sim, figure, tmp_path):
     stored = wav_loudness(wav)
     dance = dance_from_home(figure, len(stored) * figure.tick_period, seed=10)
     show = Show(axis_names=dance.axis_names, units=dance.units, positions=dance.positions,
-                loudness=stored, tick_period=figure.tick_period)
+                loudness=stored, tick_period=figure.tick_period,
+                bands=fit_frames(wav_bands(wav), len(stored)))
     trace = tmp_path / "trace.npz"
-    # the follower takes the loudness alone: a one-band node
-    s = sim("--serial", "--priority", SIM_PRIORITY, "--music", wav, "--loudness-only", "--trace", trace)
+    # a band node's frames are followed on the bands, a one-band node's on the loudness alone
+    s = sim("--serial", "--priority", SIM_PRIORITY, "--music", wav, *(() if bands else ("--loudness-only",)),
+            "--trace", trace)
     link = SerialLink(s.ready["serial"])
     records, nodes, _, _ = play(figure, show, link, ticks=TICKS, follow="smooth")
     link.close()
