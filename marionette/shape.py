@@ -198,6 +198,45 @@ def position_margin(axis, lag: float, accel: float, period: float) -> float:
     return 0.5 * lag * lag * accel + axis.max_accel * period * period
 
 
+def plan_limits(axis, headroom: float, accel_fraction: float = 1.0) -> tuple[float, float]:
+    """(speed [unit/s], acceleration [unit/s^2]) an axis's moves are planned to,
+    before the lag's share (mar_shape_lag_limits)."""
+    return headroom * axis.max_speed, headroom * accel_fraction * axis.max_accel
+
+
+def first_headroom(axis, lead: str, period: float) -> float:
+    """The headroom [1] of an axis's first plan: exact where the engine commands the
+    samples themselves, else room for its cubic interpolation."""
+    return HEADROOM_EXACT if command_model(axis, lead, period)[1] == 0 else HEADROOM
+
+
+def move_reach(axis, durations, period: float, lead: str = DEFAULT_LEAD,
+               accel_fraction: float = 1.0) -> np.ndarray:
+    """How far [unit] a shaped move of each duration [s] reaches on axis, as
+    shape_show first plans it for lead: a move to a point that far, or nearer,
+    in that time is not cut (the teach-in sizes the turn back of a folded
+    rotation with it)."""
+    lag = command_model(axis, lead, period)[0]
+    vmax, amax = plan_limits(axis, first_headroom(axis, lead, period), accel_fraction)
+    return np.array([_shape.reach_lag(float(d), vmax, amax, lag)[0]
+                     for d in np.atleast_1d(durations)])
+
+
+def last_departure(x, axis, period: float, lead: str = DEFAULT_LEAD) -> int:
+    """The sample at which shape_show's move up to the last sample of x [unit]
+    leaves (the end of the previous point of rest's rest, default prominence and
+    rest tolerance), when x is the start of a show."""
+    span = axis.max - axis.min
+    status, points = _shape.extrema(np.ascontiguousarray(x, dtype=float),
+                                    DEFAULT_PROMINENCE * span, DEFAULT_REST_TOLERANCE * span)
+    if status < 0 or len(points) < 2:
+        return 0
+    depart = int(points["rest_end"][-2])
+    if len(points) == 2:                        # the first move waits for the lead
+        depart = max(depart, min(command_model(axis, lead, period)[2], len(x) - 2))
+    return depart
+
+
 def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
                prominence=None, rest_tolerance=None, *, accel_fraction: float = 1.0,
                lead: str = DEFAULT_LEAD) -> tuple[Show, ShapeReport]:
@@ -235,9 +274,8 @@ def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
     shaped = np.empty_like(show.positions)
     axes = []
     for j in range(len(config.axes)):
-        exact = command_model(config.axes[j], lead, config.tick_period)[1] == 0
         shaped[j], ax = _shape_one(show, config, j, policy, proms[j], tols[j], accel_fraction,
-                                   lead, HEADROOM_EXACT if exact else HEADROOM)
+                                   lead, first_headroom(config.axes[j], lead, config.tick_period))
         axes.append(ax)
     for attempt in range(HEADROOM_TRIES + 1):
         found = {a.axis: a for a in _engine_limits(replace(show, positions=shaped), config, lead)}
@@ -272,7 +310,7 @@ def _shape_one(show: Show, config: FigureConfig, j: int, policy: str, prominence
     a = config.axes[j]
     T = config.tick_period
     lag, _, first_depart = command_model(a, lead, T)
-    vmax, amax = headroom * a.max_speed, headroom * accel_fraction * a.max_accel
+    vmax, amax = plan_limits(a, headroom, accel_fraction)
     status, out, points, moves = _shape.shape_axis(
         np.ascontiguousarray(show.positions[j]), T, vmax, amax, a.min, a.max, prominence,
         rest_tolerance, policy, lag, position_margin(a, lag, amax, T), first_depart)
