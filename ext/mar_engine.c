@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "mar_clock.h"
 #include "mar_time.h"
 
 
@@ -33,6 +34,8 @@ struct mar_engine {
                                      * or a seek after the source was lost: blend there */
     int source_lost;                /* latched: the live source was lost (MAR_FLAG_SOURCE_LOST) */
     double held_at;                 /* on hold: the position when following was lost [show ticks] */
+    mar_clock clock;                /* following: where the show is sampled, following the music's
+                                     * position and rate smoothly (mar_clock.h) */
     uint32_t fault;                 /* latched MAR_FLAG_FAULT_STOP | MAR_FLAG_OVERRUNS, or
                                      * MAR_FLAG_FAULT_HOLD while held for a silent node */
     int64_t tick;
@@ -424,10 +427,21 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     }
     if (e->mode == MAR_MODE_MOVE)
         e->move_time += T * (double)elapsed_periods;
+    /* following, the show is sampled at a clock that follows the music
+     * smoothly while it plays on; moves, holds and seeks set it. The
+     * paper's mode doubles and skips samples as the paper did */
+    double p = e->position, r = e->rate;
+    if (e->follow && e->opt.follow_opt.mode == MAR_FOLLOW_SMOOTH) {
+        if (e->mode == MAR_MODE_SHOW && e->was_playing && !seek)
+            mar_clock_follow(&e->clock, p, r, T, elapsed_periods, e->opt.follow_opt.rate_max - 1.0);
+        else
+            mar_clock_set(&e->clock, p, r);
+        p = e->clock.position < 0.0 ? 0.0 : e->clock.position < last ? e->clock.position : last;
+        r = e->clock.rate;
+    }
 
     /* 2. per axis: the show sampled ahead by the behaviour model, or the
      *    move's profile, or the held pose; then the hard limits */
-    const double p = e->position, r = e->rate;
     uint32_t limited = 0;
     for (size_t j = 0; j < e->n_axes; j++) {
         double target, v;
@@ -457,10 +471,10 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     mar_record rec = {
         .tick = e->tick,
         .time_ns = now_ns,
-        .position = p,
-        .rate = r,
+        .position = e->position,         /* the music's place when following */
+        .rate = e->rate,
         .live_loudness = frame,          /* NaN: no new frame this tick */
-        .stored_loudness = mar_sample(e->loudness, e->n_ticks, p, MAR_INTERP_LINEAR, &slope),
+        .stored_loudness = mar_sample(e->loudness, e->n_ticks, e->position, MAR_INTERP_LINEAR, &slope),
         .follow_confidence = e->follow ? e->follow_out.confidence : NAN,
         .flags = flags,
         .limited_axes = limited,
