@@ -302,6 +302,11 @@ static double show_target(const mar_engine *e, size_t j, double p, double r)
     return x + e->feed_forward[j] * slope * r / T;
 }
 
+/* Online moves are planned this far inside the limits [1]: a move at the
+ * limits, sampled, asks the limiter for exactly its bound, and rounding
+ * then counted ticks of a stop ramp as limited (by 1e-16). */
+#define MOVE_INSIDE (1.0 - 1e-9)
+
 /* Plan every axis's move from its present command and velocity: to the
  * request's pose (GOTO), to the show's pose at blend_position [show ticks]
  * (BLEND), or to rest (STOP); sync: all arrive together. */
@@ -314,9 +319,10 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
         double target = kind == MAR_REQ_BLEND ? show_target(e, j, blend_position, e->rate)
                       : kind == MAR_REQ_GOTO ? e->request_copy[j] : NAN;
         if (!isfinite(target))                          /* stop where braking ends */
-            target = x0 + v0 * fabs(v0) / (2.0 * l->max_accel);
+            target = x0 + v0 * fabs(v0) / (2.0 * l->max_accel * MOVE_INSIDE);
         target = target < l->pos_min ? l->pos_min : target > l->pos_max ? l->pos_max : target;
-        double d = mar_move_plan(&e->moves[j], x0, v0, target, l->max_speed, l->max_accel);
+        double d = mar_move_plan(&e->moves[j], x0, v0, target, l->max_speed * MOVE_INSIDE,
+                                 l->max_accel * MOVE_INSIDE);
         if (d > longest)
             longest = d;
     }
@@ -324,7 +330,8 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
         for (size_t j = 0; j < e->n_axes; j++) {
             const mar_limits *l = &e->axes[j].limits;
             mar_move *m = &e->moves[j];
-            mar_move_plan_timed(m, m->x0, m->v0, m->target, l->max_speed, l->max_accel, longest);
+            mar_move_plan_timed(m, m->x0, m->v0, m->target, l->max_speed * MOVE_INSIDE,
+                                l->max_accel * MOVE_INSIDE, longest);
         }
     }
     e->mode = MAR_MODE_MOVE;
