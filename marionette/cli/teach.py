@@ -193,9 +193,10 @@ def _fold_rotation(mapped: np.ndarray, config, name: str, times: np.ndarray, lea
         return
     fold = fold_turns(yaw, axis.min, axis.max)
     T = config.tick_period
+    rate = config.follow.rate_max
     mapped[j] = unwind(fold.values, fold.wraps,
-                       lambda d: move_reach(axis, d, T, lead, accel_fraction), T,
-                       lambda x: last_departure(x, axis, T, lead))
+                       lambda d: move_reach(axis, d, T, lead, accel_fraction, rate), T,
+                       lambda x: last_departure(x, axis, T, lead, rate))
     at = ", ".join(f"{times[k]:.2f} s" for k in fold.wraps[:5]) + (", ..." if fold.wraps.size > 5 else "")
     print(f"warning: axis {name!r}: the dancer's yaw spans {(yaw.max() - yaw.min()) / TURN:.1f} turns "
           f"(from {yaw.min():.3g} to {yaw.max():.3g} {axis.unit}), beyond its limits "
