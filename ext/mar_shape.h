@@ -169,8 +169,9 @@ int mar_shape_plan_open(double x0, double x1, double t0, double duration,
 
 /* Position [unit], velocity [unit/s] and acceleration [unit/s^2] of a move
  * at time t [s] (x0 before t0, x1 after t0 + duration, velocity and
- * acceleration 0 outside the move; the position never leaves
- * [min(x0, x1), max(x0, x1)]). Any output pointer may be NULL. */
+ * acceleration 0 outside the move, and at its ends the acceleration of an
+ * open end's turn; the position never leaves [min(x0, x1), max(x0, x1)]).
+ * Any output pointer may be NULL. */
 void mar_shape_eval(const mar_shape_profile *p, double t,
                     double *x, double *v, double *a);
 
