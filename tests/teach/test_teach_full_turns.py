@@ -154,7 +154,7 @@ def test_a_dance_that_turns_twice_goes_through_teach(tmp_path):
     # than the figure may): it lies within 1.5 s after its wrap, and the shaper cuts
     # it by less than 0.05 rad (by 1.2 rad when the turn back started at the wrap
     # itself). A climax of the dance after a turn back may still be cut: this one's
-    # last, 0.48 rad (0.12 rad before), where the figure follows a dancer still
+    # last, 0.37 rad (0.12 rad before), where the figure follows a dancer still
     # turning faster than it can
     wrap_s = [float(x) for x in re.search(r"\(at ([0-9., s]+)\)", result.stderr).group(1)
               .replace(" s", "").split(",")]
