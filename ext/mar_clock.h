@@ -24,8 +24,6 @@
 #ifndef MAR_CLOCK_H
 #define MAR_CLOCK_H
 
-#include <stdint.h>
-
 #define MAR_CLOCK_OMEGA 3.0         /* the tracker's poles [1/s]: a correction of one tick
                                        settles in about 1.5 s, changing the rate by at most
                                        1.6 % and the rate's rate of change by 0.44 /s^2 */
@@ -41,10 +39,10 @@ typedef struct {
 /* Stand at position at rate, with no change of rate (a jump, a blend, a seek). */
 void mar_clock_set(mar_clock *c, double position, double rate);
 
-/* Advance by elapsed_periods ticks of period [s] towards the music's
- * position and rate at the end of them; catch_up [1] as above (at least
- * MAR_CLOCK_MIN_CATCH_UP). */
-void mar_clock_follow(mar_clock *c, double position, double rate, double period,
-                      int64_t elapsed_periods, double catch_up);
+/* One tick of period [s] towards the music's position and rate; catch_up
+ * [1] as above (at least MAR_CLOCK_MIN_CATCH_UP). One tick also after an
+ * overrun: the periods it missed (the nodes held their last setpoint) are
+ * caught up like a far music, not jumped over. */
+void mar_clock_follow(mar_clock *c, double position, double rate, double period, double catch_up);
 
 #endif

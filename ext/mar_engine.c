@@ -440,7 +440,7 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     double p = e->position, r = e->rate;
     if (e->follow && e->opt.follow_opt.mode == MAR_FOLLOW_SMOOTH) {
         if (e->mode == MAR_MODE_SHOW && e->was_playing && !seek)
-            mar_clock_follow(&e->clock, p, r, T, elapsed_periods, e->opt.follow_opt.rate_max - 1.0);
+            mar_clock_follow(&e->clock, p, r, T, e->opt.follow_opt.rate_max - 1.0);
         else
             mar_clock_set(&e->clock, p, r);
         p = e->clock.position < 0.0 ? 0.0 : e->clock.position < last ? e->clock.position : last;
