@@ -78,9 +78,6 @@ cdef extern from "mar_shape.h" nogil:
                            double max_speed, double max_accel, double lag, mar_shape_profile *p)
     int mar_shape_plan(double x0, double x1, double t0, double duration,
                        double max_speed, double max_accel, mar_shape_profile *p)
-    int mar_shape_plan_open(double x0, double x1, double t0, double duration,
-                            double max_speed, double max_accel, double lag, double smooth,
-                            int open, double accel_start, double accel_end, mar_shape_profile *p)
     void mar_shape_eval(const mar_shape_profile *p, double t, double *x, double *v, double *a)
     int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_tolerance,
                           mar_shape_extremum *out, size_t cap, size_t *count)
@@ -162,18 +159,6 @@ cdef dict _profile_dict(const mar_shape_profile *p):
             "accel": p.accel, "peak_speed": p.peak_speed, "ramp": p.ramp, "smooth": p.smooth,
             "accel_end": p.accel_end, "ramp_end": p.ramp_end, "open": p.open}
 
-
-def plan_open(double x0, double x1, double t0, double duration, double max_speed,
-              double max_accel, double lag, double smooth, int open, double accel_start,
-              double accel_end):
-    """(status, profile dict or None) of mar_shape_plan_open: a move whose
-    ends in open (OPEN_* bits) turn with the given accelerations [unit/s^2]."""
-    cdef mar_shape_profile p
-    cdef int r = mar_shape_plan_open(x0, x1, t0, duration, max_speed, max_accel, lag, smooth,
-                                     open, accel_start, accel_end, &p)
-    if r != 0:
-        return r, None
-    return r, _profile_dict(&p)
 
 
 cdef int _profile_from(prof, mar_shape_profile *p) except -1:
