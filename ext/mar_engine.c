@@ -5,6 +5,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "mar_clock.h"
 #include "mar_time.h"
 
 
@@ -35,6 +36,8 @@ struct mar_engine {
                                      * or a seek after the source was lost: blend there */
     int source_lost;                /* latched: the live source was lost (MAR_FLAG_SOURCE_LOST) */
     double held_at;                 /* on hold: the position when following was lost [show ticks] */
+    mar_clock clock;                /* following: where the show is sampled, following the music's
+                                     * position and rate smoothly (mar_clock.h) */
     uint32_t fault;                 /* latched MAR_FLAG_FAULT_STOP | MAR_FLAG_OVERRUNS, or
                                      * MAR_FLAG_FAULT_HOLD while held for a silent node */
     int64_t tick;
@@ -307,6 +310,11 @@ static double show_target(const mar_engine *e, size_t j, double p, double r)
     return x + e->feed_forward[j] * slope * r / T;
 }
 
+/* Online moves are planned this far inside the limits [1]: a move at the
+ * limits, sampled, asks the limiter for exactly its bound, and rounding
+ * then counted ticks of a stop ramp as limited (by 1e-16). */
+#define MOVE_INSIDE (1.0 - 1e-9)
+
 /* The servos' motion when this tick's command takes effect: the previous
  * command, held for elapsed_periods, moved each lag (its dead time only
  * shifts it in time). */
@@ -331,9 +339,10 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
         double target = kind == MAR_REQ_BLEND ? show_target(e, j, blend_position, e->rate)
                       : kind == MAR_REQ_GOTO ? e->request_copy[j] : NAN;
         if (!isfinite(target))                          /* stop where braking ends */
-            target = x0 + v0 * fabs(v0) / (2.0 * l->max_accel);
+            target = x0 + v0 * fabs(v0) / (2.0 * l->max_accel * MOVE_INSIDE);
         target = target < l->pos_min ? l->pos_min : target > l->pos_max ? l->pos_max : target;
-        double d = mar_move_plan(&e->moves[j], x0, v0, target, l->max_speed, l->max_accel);
+        double d = mar_move_plan(&e->moves[j], x0, v0, target, l->max_speed * MOVE_INSIDE,
+                                 l->max_accel * MOVE_INSIDE);
         if (d > longest)
             longest = d;
     }
@@ -341,7 +350,8 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
         for (size_t j = 0; j < e->n_axes; j++) {
             const mar_limits *l = &e->axes[j].limits;
             mar_move *m = &e->moves[j];
-            mar_move_plan_timed(m, m->x0, m->v0, m->target, l->max_speed, l->max_accel, longest);
+            mar_move_plan_timed(m, m->x0, m->v0, m->target, l->max_speed * MOVE_INSIDE,
+                                l->max_accel * MOVE_INSIDE, longest);
         }
     }
     e->mode = MAR_MODE_MOVE;
@@ -472,10 +482,21 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     }
     if (e->mode == MAR_MODE_MOVE)
         e->move_time += T * (double)elapsed_periods;
+    /* following, the show is sampled at a clock that follows the music
+     * smoothly while it plays on; moves, holds and seeks set it. The
+     * paper's mode doubles and skips samples as the paper did */
+    double p = e->position, r = e->rate;
+    if (e->follow && e->opt.follow_opt.mode == MAR_FOLLOW_SMOOTH) {
+        if (e->mode == MAR_MODE_SHOW && e->was_playing && !seek)
+            mar_clock_follow(&e->clock, p, r, T, e->opt.follow_opt.rate_max - 1.0);
+        else
+            mar_clock_set(&e->clock, p, r);
+        p = e->clock.position < 0.0 ? 0.0 : e->clock.position < last ? e->clock.position : last;
+        r = e->clock.rate;
+    }
 
     /* 2. per axis: the show sampled ahead by the behaviour model, or the
      *    move's profile, or the held pose; then the hard limits */
-    const double p = e->position, r = e->rate;
     uint32_t limited = 0;
     int stopping = e->mode == MAR_MODE_MOVE && e->move_kind == MAR_REQ_STOP;
     for (size_t j = 0; j < e->n_axes; j++) {
@@ -512,10 +533,10 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     mar_record rec = {
         .tick = e->tick,
         .time_ns = now_ns,
-        .position = p,
-        .rate = r,
+        .position = e->position,         /* the music's place when following */
+        .rate = e->rate,
         .live_loudness = frame,          /* NaN: no new frame this tick */
-        .stored_loudness = mar_sample(e->loudness, e->n_ticks, p, MAR_INTERP_LINEAR, &slope),
+        .stored_loudness = mar_sample(e->loudness, e->n_ticks, e->position, MAR_INTERP_LINEAR, &slope),
         .follow_confidence = e->follow ? e->follow_out.confidence : NAN,
         .flags = flags,
         .limited_axes = limited,

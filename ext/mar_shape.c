@@ -78,6 +78,10 @@ int mar_shape_plan(double x0, double x1, double t0, double T,
     p->peak_speed = peak;
     p->ramp = ramp;
     p->smooth = 0.0;
+    p->accel_end = accel;
+    p->ramp_end = ramp;
+    p->open = 0;
+    p->reserved = 0;
     return 0;
 }
 
@@ -190,100 +194,169 @@ int mar_shape_plan_lag(double x0, double x1, double t0, double T,
     p->x0 = x0;
     p->x1 = x1;
     p->smooth = w;
+    p->accel_end = p->accel;
+    p->ramp_end = p->ramp;
+    p->open = 0;
+    p->reserved = 0;
     return 0;
 }
 
-/* The core's position [unit] at tau [s] after its start; velocity and
- * acceleration out. */
-static double eval_core(const mar_shape_profile *p, double tau, double *v, double *a)
+/* Closed-end accelerations mar_shape_plan_open tries: the open end's, the
+ * limit and 10 halvings of it. */
+#define CLOSED_TRIES 12
+
+int mar_shape_plan_open(double x0, double x1, double t0, double T, double vmax, double amax,
+                        double lag, double w, int open, double a_start, double a_end,
+                        mar_shape_profile *p)
 {
-    double s = p->x1 >= p->x0 ? 1.0 : -1.0;    /* direction [1] */
-    double T = p->duration - p->smooth, ramp = p->ramp, acc = p->accel;
-    double x, vel, ac;
-    if (tau <= 0.0) {
-        x = p->x0;
-        vel = 0.0;
-        ac = 0.0;
-    } else if (tau >= T) {
-        x = p->x1;                              /* the end is hit bit for bit */
-        vel = 0.0;
-        ac = 0.0;
-    } else if (tau < ramp) {
-        x = p->x0 + s * 0.5 * acc * tau * tau;
-        vel = s * acc * tau;
-        ac = s * acc;
-    } else if (tau <= T - ramp) {
-        x = p->x0 + s * (0.5 * acc * ramp * ramp + p->peak_speed * (tau - ramp));
-        vel = s * p->peak_speed;
-        ac = 0.0;
-    } else {
-        double r = T - tau;                     /* time to arrival [s] */
-        x = p->x1 - s * 0.5 * acc * r * r;
-        vel = s * acc * r;
-        ac = -s * acc;
+    if (p == NULL || !isfinite(x0) || !isfinite(x1) || !isfinite(t0) || !finite_positive(T) ||
+        !finite_positive(vmax) || !finite_positive(amax) || !isfinite(lag) || lag < 0.0 ||
+        !isfinite(w) || w < 0.0 || w >= T || (open & ~(MAR_SHAPE_OPEN_START | MAR_SHAPE_OPEN_END)) ||
+        ((open & MAR_SHAPE_OPEN_START) && !finite_positive(a_start)) ||
+        ((open & MAR_SHAPE_OPEN_END) && !finite_positive(a_end)))
+        return -EINVAL;
+    int os = (open & MAR_SHAPE_OPEN_START) != 0, oe = (open & MAR_SHAPE_OPEN_END) != 0;
+    double v, a;                                /* the limits [unit/s], [unit/s^2] */
+    mar_shape_lag_limits(w, lag, vmax, amax, &v, &a);
+    double d = fabs(x1 - x0);                   /* [unit] */
+    if (d == 0.0)
+        return MAR_SHAPE_INFEASIBLE;            /* no turn at a move that stands still */
+    /* a closed end's acceleration: the open end's, the limit, then halves of
+     * it (a gentle closed end makes the cruise faster, so an open end's ramp
+     * longer), the first with which the move fits */
+    double as = os ? a_start : oe ? a_end : a, ae = oe ? a_end : as;
+    if (as > a * (1.0 + FIT_SLACK) || ae > a * (1.0 + FIT_SLACK))
+        return MAR_SHAPE_INFEASIBLE;
+    double Tc = T - (os ? 0.0 : 0.5 * w) - (oe ? 0.0 : 0.5 * w);     /* the core [s] */
+    double dc = d + ((os ? as : 0.0) + (oe ? ae : 0.0)) * w * w / 24.0;  /* its distance [unit] */
+    double closed = a;                          /* the next closed-end try [unit/s^2] */
+    for (int tries = 0; tries < CLOSED_TRIES; ++tries) {
+        double h = 0.5 / as + 0.5 / ae;         /* ramps' time per speed, halved [s^2/unit] */
+        double disc = Tc * Tc - 4.0 * h * dc;   /* dc = V Tc - h V^2 [s^2] */
+        double V = disc >= 0.0 ? 2.0 * dc / (Tc + sqrt(disc)) : INFINITY;  /* [unit/s] */
+        double rs = V / as, re = V / ae;        /* [s] */
+        int ok = V <= v * (1.0 + FIT_SLACK) && Tc - rs - re >= w * (1.0 - FIT_SLACK) &&
+                 (!os || rs >= 0.5 * w * (1.0 - FIT_SLACK)) && (!oe || re >= 0.5 * w * (1.0 - FIT_SLACK));
+        if (ok) {
+            p->t0 = t0;
+            p->duration = T;
+            p->x0 = x0;
+            p->x1 = x1;
+            p->accel = as;
+            p->accel_end = ae;
+            p->peak_speed = V > v ? v : V;
+            p->ramp = rs;
+            p->ramp_end = re;
+            p->smooth = w;
+            p->open = open;
+            p->reserved = 0;
+            return 0;
+        }
+        if (os && oe)
+            break;
+        if (!os)
+            as = closed;
+        if (!oe)
+            ae = closed;
+        closed *= 0.5;
     }
-    /* a monotone move: rounding never takes it past either end */
-    double lo = p->x0 < p->x1 ? p->x0 : p->x1, hi = p->x0 < p->x1 ? p->x1 : p->x0;
-    if (x < lo)
-        x = lo;
-    if (x > hi)
-        x = hi;
+    return MAR_SHAPE_INFEASIBLE;
+}
+
+/* The core in the move's direction, from its start: y(tau) [unit] at tau
+ * [s] after the core starts, its velocity and acceleration; an open end goes
+ * on as the parabola of its ramp beyond the core, a closed one stands. */
+static double core_y(const mar_shape_profile *p, double Tc, double dc, double tau,
+                     double *v, double *a)
+{
+    double as = p->accel, ae = p->accel_end, rs = p->ramp, re = p->ramp_end, V = p->peak_speed;
+    double y, vel, ac;
+    if (tau < rs && (tau >= 0.0 || (p->open & MAR_SHAPE_OPEN_START))) {
+        y = 0.5 * as * tau * tau;
+        vel = as * tau;
+        ac = as;
+    } else if (tau < 0.0) {
+        y = vel = ac = 0.0;
+    } else if (tau <= Tc - re) {
+        y = 0.5 * as * rs * rs + V * (tau - rs);
+        vel = V;
+        ac = 0.0;
+    } else if (tau < Tc || (p->open & MAR_SHAPE_OPEN_END)) {
+        double r = Tc - tau;                    /* time to the core's end [s] */
+        y = dc - 0.5 * ae * r * r;
+        vel = ae * r;
+        ac = -ae;
+    } else {
+        y = dc;
+        vel = ac = 0.0;
+    }
     if (v != NULL)
         *v = vel;
     if (a != NULL)
         *a = ac;
-    return x;
+    return y;
 }
 
-/* Integral of (core position - x0) from its start to tau [s], [unit*s]:
- * piecewise cubic, for the moving average. */
-static double core_integral(const mar_shape_profile *p, double tau)
+/* Integral of core_y from the core's start to tau [s], [unit*s]: piecewise
+ * cubic, for the moving average. */
+static double core_integral(const mar_shape_profile *p, double Tc, double dc, double tau)
 {
-    double s = p->x1 >= p->x0 ? 1.0 : -1.0;    /* direction [1] */
-    double T = p->duration - p->smooth, r = p->ramp, acc = p->accel, v = p->peak_speed;
-    double D = fabs(p->x1 - p->x0);             /* [unit] */
-    double cruise = T - 2.0 * r;                /* [s] */
-    if (tau <= 0.0)
-        return 0.0;
-    if (tau < r)
-        return s * acc * tau * tau * tau / 6.0;
-    double at_cruise = acc * r * r * r / 6.0;   /* integral over the first ramp */
-    if (tau <= T - r) {
-        double c = tau - r;
-        return s * (at_cruise + 0.5 * acc * r * r * c + 0.5 * v * c * c);
+    double as = p->accel, ae = p->accel_end, rs = p->ramp, re = p->ramp_end, V = p->peak_speed;
+    if (tau < 0.0)
+        return (p->open & MAR_SHAPE_OPEN_START) ? as * tau * tau * tau / 6.0 : 0.0;
+    if (tau <= rs)
+        return as * tau * tau * tau / 6.0;
+    double at_cruise = as * rs * rs * rs / 6.0;     /* over the first ramp */
+    double te = Tc - re;                            /* the last ramp starts [s] */
+    if (tau <= te) {
+        double c = tau - rs;
+        return at_cruise + 0.5 * as * rs * rs * c + 0.5 * V * c * c;
     }
-    double at_decel = at_cruise + 0.5 * acc * r * r * cruise + 0.5 * v * cruise * cruise;
-    double q = T - (tau < T ? tau : T);         /* time to the core's end [s] */
-    double in_decel = D * (r - q) - acc * (r * r * r - q * q * q) / 6.0;
-    double after = tau > T ? D * (tau - T) : 0.0;
-    return s * (at_decel + in_decel + after);
+    double c = te - rs;
+    double at_end = at_cruise + 0.5 * as * rs * rs * c + 0.5 * V * c * c;
+    double u = (p->open & MAR_SHAPE_OPEN_END) || tau < Tc ? tau : Tc;
+    double q = Tc - u;                              /* time to the core's end [s] */
+    double in_end = dc * (u - te) - ae * (re * re * re - q * q * q) / 6.0;
+    return at_end + in_end + (tau > u ? dc * (tau - u) : 0.0);
 }
 
 /* Position [unit] at tau [s] after departure; velocity and acceleration out:
  * the core itself, or its moving average over p->smooth. */
 static double eval_local(const mar_shape_profile *p, double tau, double *v, double *a)
 {
-    double w = p->smooth;
-    if (!(w > 0.0))
-        return eval_core(p, tau, v, a);
-    double x;
+    double w = p->smooth, s = p->x1 >= p->x0 ? 1.0 : -1.0;     /* [s], direction [1] */
+    int os = (p->open & MAR_SHAPE_OPEN_START) != 0, oe = (p->open & MAR_SHAPE_OPEN_END) != 0;
+    double q0 = os ? 0.0 : 0.5 * w;                 /* the core starts [s] */
+    double Tc = p->duration - q0 - (oe ? 0.0 : 0.5 * w);
+    double shift = w * w / 24.0;                    /* a parabola's, averaged over w [s^2] */
+    double c0 = p->x0 - (os ? s * p->accel * shift : 0.0);      /* the core's start [unit] */
+    double dc = fabs(p->x1 - p->x0) + ((os ? p->accel : 0.0) + (oe ? p->accel_end : 0.0)) * shift;
+    double lo = p->x0 < p->x1 ? p->x0 : p->x1, hi = p->x0 < p->x1 ? p->x1 : p->x0;
+    double x, vel = 0.0, ac = 0.0;
     if (tau <= 0.0) {
         x = p->x0;
     } else if (tau >= p->duration) {
-        x = p->x1;                              /* the end is hit bit for bit */
+        x = p->x1;                                  /* the end is hit bit for bit */
+    } else if (!(w > 0.0)) {
+        x = c0 + s * core_y(p, Tc, dc, tau, &vel, &ac);
     } else {
-        /* the core starts at w/2: the window [tau - w/2, tau + w/2] is
-         * [tau - w, tau] in the core's time */
-        x = p->x0 + (core_integral(p, tau) - core_integral(p, tau - w)) / w;
-        double lo = p->x0 < p->x1 ? p->x0 : p->x1, hi = p->x0 < p->x1 ? p->x1 : p->x0;
-        x = x < lo ? lo : x > hi ? hi : x;
+        double t = tau - q0;                        /* the window's middle, core time [s] */
+        x = c0 + s * (core_integral(p, Tc, dc, t + 0.5 * w) - core_integral(p, Tc, dc, t - 0.5 * w)) / w;
+        double v1, v0;
+        double y1 = core_y(p, Tc, dc, t + 0.5 * w, &v1, NULL), y0 = core_y(p, Tc, dc, t - 0.5 * w, &v0, NULL);
+        vel = (y1 - y0) / w;
+        ac = (v1 - v0) / w;
     }
-    double v1, v0, a1, a0;
-    double x1 = eval_core(p, tau, &v1, &a1), x0 = eval_core(p, tau - w, &v0, &a0);
+    if (tau == 0.0 && os) {                         /* a turn: at rest, accelerating */
+        ac = p->accel;
+    } else if (tau == p->duration && oe) {
+        ac = -p->accel_end;
+    }
+    x = x < lo ? lo : x > hi ? hi : x;              /* a monotone move: rounding never passes an end */
     if (v != NULL)
-        *v = (x1 - x0) / w;
+        *v = s * vel;
     if (a != NULL)
-        *a = (v1 - v0) / w;
+        *a = s * ac;
     return x;
 }
 
@@ -375,6 +448,51 @@ int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_
     return 0;
 }
 
+/* Candidate accelerations a turn is tried with, from the larger of its two
+ * moves' down to the smaller, geometrically. */
+#define TURN_TRIES 8
+
+/* Where the figure turns at a climax without a rest (the move before it
+ * arrives when the next leaves, in the other direction), the two moves
+ * share an acceleration there instead of each coming to rest with none:
+ * the climax is the vertex of a parabola. From the first turn to the last,
+ * the largest of TURN_TRIES accelerations (within both windows' limits)
+ * with which both moves fit is taken, the move before keeping its start as
+ * planned, the one after planned to rest at its end for now (the next turn
+ * may open it); where none fits, both keep their ends at rest there. */
+static void open_turns(const mar_shape_options *opt, mar_shape_segment *seg, size_t count)
+{
+    for (size_t i = 1; i < count; ++i) {
+        mar_shape_profile *a = &seg[i - 1].profile, *b = &seg[i].profile;
+        double da = a->x1 - a->x0, db = b->x1 - b->x0;      /* [unit] */
+        if (seg[i - 1].arrive_tick != seg[i].depart_tick || !(da * db < 0.0))
+            continue;                                       /* a rest there, or no turn */
+        double va, aa, vb, ab;                              /* each window's limits */
+        mar_shape_lag_limits(a->smooth, opt->lag, opt->max_speed, opt->max_accel, &va, &aa);
+        mar_shape_lag_limits(b->smooth, opt->lag, opt->max_speed, opt->max_accel, &vb, &ab);
+        double hi = a->accel_end > b->accel ? a->accel_end : b->accel;      /* [unit/s^2] */
+        double lo = a->accel_end > b->accel ? b->accel : a->accel_end;
+        double cap = aa < ab ? aa : ab;
+        hi = hi < cap ? hi : cap;
+        lo = lo < hi ? lo : hi;
+        if (!(lo > 0.0))
+            continue;
+        for (int c = 0; c < TURN_TRIES; ++c) {
+            double shared = hi * pow(lo / hi, (double)c / (TURN_TRIES - 1));
+            mar_shape_profile pa, pb;
+            if (mar_shape_plan_open(a->x0, a->x1, a->t0, a->duration, opt->max_speed, opt->max_accel,
+                                    opt->lag, a->smooth, (a->open & MAR_SHAPE_OPEN_START) | MAR_SHAPE_OPEN_END,
+                                    a->accel, shared, &pa) == 0 &&
+                mar_shape_plan_open(b->x0, b->x1, b->t0, b->duration, opt->max_speed, opt->max_accel,
+                                    opt->lag, b->smooth, MAR_SHAPE_OPEN_START, shared, 0.0, &pb) == 0) {
+                *a = pa;
+                *b = pb;
+                break;
+            }
+        }
+    }
+}
+
 int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,
                    mar_shape_extremum *ext, size_t ext_cap, size_t *n_ext,
                    mar_shape_segment *seg, size_t seg_cap, size_t *n_seg,
@@ -464,12 +582,17 @@ int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,
         s->reduced_by = fabs(b->value - end);
         s->action = action;
         s->reserved = 0;
-        for (int64_t k = a->tick; k <= depart; ++k)       /* the hold */
-            out[k] = start;
-        for (int64_t k = depart + 1; k < b->tick; ++k)    /* the move */
-            out[k] = eval_local(&s->profile, (double)(k - depart) * T, NULL, NULL);
-        out[b->tick] = end;                               /* the climax, at rest */
         start = end;
+    }
+    open_turns(opt, seg, count);
+    for (size_t i = 0; i < count; ++i) {
+        const mar_shape_segment *s = &seg[i];
+        double from = s->profile.x0;                      /* [unit] */
+        for (int64_t k = s->from_tick; k <= s->depart_tick; ++k)     /* the hold */
+            out[k] = from;
+        for (int64_t k = s->depart_tick + 1; k < s->arrive_tick; ++k)  /* the move */
+            out[k] = eval_local(&s->profile, (double)(k - s->depart_tick) * T, NULL, NULL);
+        out[s->arrive_tick] = s->profile.x1;              /* the climax */
     }
     *n_seg = count;
     return infeasible;

@@ -32,24 +32,40 @@ typedef enum {
 #define MAR_SHAPE_ACT_BORROWED 2   /* the move left its point of rest early */
 #define MAR_SHAPE_ACT_REJECTED 4   /* infeasible under MAR_SHAPE_REJECT */
 
-/* One rest-to-rest move: x(t0) = x0, x(t0 + duration) = x1, velocity 0 at
- * both ends. Its core is a parabolic move over duration - smooth, from
- * t0 + smooth/2: ramps of constant acceleration +-accel [unit/s^2] of
- * length ramp [s] at each end, and between them constant speed peak_speed
- * [unit/s] (none when ramp is half the core: a triangle). With smooth > 0
- * the move is the moving average of the core over a window of smooth [s]:
- * the acceleration then changes at a finite jerk and is 0 at both ends, so
- * the engine's lag feed-forward (command = x + lag * x') has no step in
- * velocity (docs/shaping.md). */
+/* mar_shape_profile.open bits: an end at a climax where the figure turns
+ * without stopping its acceleration (the neighbouring move shares it) */
+#define MAR_SHAPE_OPEN_START 1
+#define MAR_SHAPE_OPEN_END   2
+
+/* One move: x(t0) = x0, x(t0 + duration) = x1, velocity 0 at both ends.
+ * Its core is a parabolic move: a ramp of constant acceleration accel
+ * [unit/s^2] of length ramp [s], constant speed peak_speed [unit/s], a ramp
+ * of constant deceleration accel_end of length ramp_end (none between them
+ * when the ramps fill the core: a triangle). With smooth > 0 the move is the
+ * moving average of the core over a window of smooth [s]: the acceleration
+ * then changes at a finite jerk, so the engine's lag feed-forward (command =
+ * x + lag * x') has no step in velocity (docs/shaping.md).
+ * A closed end (at rest) has acceleration 0: the core starts smooth/2 after
+ * t0 (ends smooth/2 before the arrival), at rest. An open end
+ * (MAR_SHAPE_OPEN_*) is a turn: there the move has velocity 0 but the
+ * acceleration of its ramp, which the neighbouring move shares, so the
+ * climax is the vertex of a parabola, not a flat top; the core reaches that
+ * end (and goes on as the same parabola beyond it), starting (ending)
+ * accel * smooth^2 / 24 beyond x0 (x1), the moving average's shift of a
+ * parabola, so that the move is at x0 (x1) there. */
 typedef struct {
     double t0;          /* departure [s], from the first tick of the show */
     double duration;    /* T [s], > 0 */
     double x0;          /* start position [unit] */
     double x1;          /* end position [unit] */
-    double accel;       /* magnitude of the core's ramp acceleration [unit/s^2] */
+    double accel;       /* magnitude of the core's first ramp's acceleration [unit/s^2] */
     double peak_speed;  /* magnitude of the core's cruise speed [unit/s] */
-    double ramp;        /* length of each ramp of the core [s] */
+    double ramp;        /* length of the core's first ramp [s] */
     double smooth;      /* width of the moving average [s], 0 <= smooth < duration */
+    double accel_end;   /* magnitude of the core's last ramp's deceleration [unit/s^2] */
+    double ramp_end;    /* length of the core's last ramp [s] */
+    int32_t open;       /* MAR_SHAPE_OPEN_* bits; 0: rest to rest */
+    int32_t reserved;   /* 0 */
 } mar_shape_profile;
 
 /* A point of rest: an extremum of the taught trajectory, or an end. */
@@ -139,9 +155,23 @@ int mar_shape_plan(double x0, double x1, double t0, double duration,
 int mar_shape_plan_lag(double x0, double x1, double t0, double duration,
                        double max_speed, double max_accel, double lag, mar_shape_profile *p);
 
+/* The move of mar_shape_plan_lag with smoothing width smooth [s] and the
+ * ends of open (MAR_SHAPE_OPEN_* bits): an open end's ramp has the
+ * acceleration accel_start (accel_end) [unit/s^2], > 0; a closed one's the
+ * first that fits of the open end's, the limit and halves of the limit. The ramps, the cruise and the
+ * accelerations keep the limits of mar_shape_lag_limits(smooth); the cruise
+ * lasts at least smooth and an open end's ramp at least smooth / 2 (so the
+ * move is the parabola there). Returns 0 with *p set, MAR_SHAPE_INFEASIBLE
+ * (*p untouched) when no such move fits, -EINVAL for bad arguments. */
+int mar_shape_plan_open(double x0, double x1, double t0, double duration,
+                        double max_speed, double max_accel, double lag, double smooth,
+                        int open, double accel_start, double accel_end, mar_shape_profile *p);
+
 /* Position [unit], velocity [unit/s] and acceleration [unit/s^2] of a move
- * at time t [s] (x0 before t0, x1 after t0 + duration; the position never
- * leaves [min(x0, x1), max(x0, x1)]). Any output pointer may be NULL. */
+ * at time t [s] (x0 before t0, x1 after t0 + duration, velocity and
+ * acceleration 0 outside the move, and at its ends the acceleration of an
+ * open end's turn; the position never leaves [min(x0, x1), max(x0, x1)]).
+ * Any output pointer may be NULL. */
 void mar_shape_eval(const mar_shape_profile *p, double t,
                     double *x, double *v, double *a);
 
@@ -164,7 +194,12 @@ int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_
  * consecutive points a move leaving at the end of the first point's rest
  * (the figure holds the taught rest; the first move not before
  * opt->first_depart) and arriving at the second point's climax tick, at
- * rest, planned by mar_shape_plan_lag with opt->lag. A move's end is kept
+ * rest, planned by mar_shape_plan_lag with opt->lag. Then, from the first
+ * climax to the last, at every climax without a rest where the figure
+ * turns, the two moves share an acceleration (mar_shape_plan_open): the
+ * largest of a few, from the larger of theirs down to the smaller, with
+ * which both fit; the climax is then sharp. Where none fits, it stays at
+ * rest (flat). A move's end is kept
  * opt->pos_margin inside the position limits (reported as reduced). An infeasible move is handled by opt->policy and
  * always reported in its segment. out[0..n) receives the shaped trajectory
  * at every tick [unit]. Buffers: ext and seg of at least n entries each

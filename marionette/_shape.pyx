@@ -25,6 +25,8 @@ cdef extern from "mar_shape.h" nogil:
         MAR_SHAPE_ACT_REDUCED
         MAR_SHAPE_ACT_BORROWED
         MAR_SHAPE_ACT_REJECTED
+        MAR_SHAPE_OPEN_START
+        MAR_SHAPE_OPEN_END
     ctypedef struct mar_shape_profile:
         double t0
         double duration
@@ -34,6 +36,10 @@ cdef extern from "mar_shape.h" nogil:
         double peak_speed
         double ramp
         double smooth
+        double accel_end
+        double ramp_end
+        int32_t open
+        int32_t reserved
     ctypedef struct mar_shape_extremum:
         int64_t tick
         int64_t rest_end
@@ -87,7 +93,8 @@ ACT_BORROWED = MAR_SHAPE_ACT_BORROWED
 ACT_REJECTED = MAR_SHAPE_ACT_REJECTED
 
 # A move, as mar_shape_profile.
-PROFILE_FIELDS = ("t0", "duration", "x0", "x1", "accel", "peak_speed", "ramp", "smooth")
+PROFILE_FIELDS = ("t0", "duration", "x0", "x1", "accel", "peak_speed", "ramp", "smooth",
+                  "accel_end", "ramp_end", "open")
 EXTREMUM_DTYPE = np.dtype([
     ("tick", "i8"), ("rest_end", "i8"),     # climax and last tick of its rest [tick]
     ("value", "f8"),                        # taught position [unit]
@@ -104,7 +111,11 @@ SEGMENT_DTYPE = np.dtype([
     ("accel", "f8"), ("peak_speed", "f8"),  # [unit/s^2], [unit/s]
     ("ramp", "f8"),                         # [s]
     ("smooth", "f8"),                       # moving-average window [s]
+    ("accel_end", "f8"), ("ramp_end", "f8"),  # the core's last ramp [unit/s^2], [s]
+    ("open", "i4"),                         # OPEN_* bits: ends that turn without rest
 ])
+OPEN_START = MAR_SHAPE_OPEN_START
+OPEN_END = MAR_SHAPE_OPEN_END
 
 
 def reach(double duration, double max_speed, double max_accel):
@@ -140,8 +151,14 @@ def plan(double x0, double x1, double t0, double duration, double max_speed, dou
     cdef int r = mar_shape_plan_lag(x0, x1, t0, duration, max_speed, max_accel, lag, &p)
     if r != 0:
         return r, None
-    return r, {"t0": p.t0, "duration": p.duration, "x0": p.x0, "x1": p.x1,
-               "accel": p.accel, "peak_speed": p.peak_speed, "ramp": p.ramp, "smooth": p.smooth}
+    return r, _profile_dict(&p)
+
+
+cdef dict _profile_dict(const mar_shape_profile *p):
+    return {"t0": p.t0, "duration": p.duration, "x0": p.x0, "x1": p.x1,
+            "accel": p.accel, "peak_speed": p.peak_speed, "ramp": p.ramp, "smooth": p.smooth,
+            "accel_end": p.accel_end, "ramp_end": p.ramp_end, "open": p.open}
+
 
 
 cdef int _profile_from(prof, mar_shape_profile *p) except -1:
@@ -153,6 +170,10 @@ cdef int _profile_from(prof, mar_shape_profile *p) except -1:
     p.peak_speed = prof["peak_speed"]
     p.ramp = prof["ramp"]
     p.smooth = prof["smooth"]
+    p.accel_end = prof["accel_end"]
+    p.ramp_end = prof["ramp_end"]
+    p.open = prof["open"]
+    p.reserved = 0
     return 0
 
 
@@ -246,7 +267,8 @@ def shape_axis(x, double period, double max_speed, double max_accel, double pos_
             segs[i] = (s.from_tick, s.depart_tick, s.arrive_tick, s.target, s.shortfall,
                        s.reduced_by, s.action, s.profile.t0, s.profile.duration,
                        s.profile.x0, s.profile.x1, s.profile.accel, s.profile.peak_speed,
-                       s.profile.ramp, s.profile.smooth)
+                       s.profile.ramp, s.profile.smooth, s.profile.accel_end,
+                       s.profile.ramp_end, s.profile.open)
         return r, out, extr, segs
     finally:
         free(ext)

@@ -101,6 +101,7 @@ class ShapeReport:
     axes: list[AxisShape]
     accel_fraction: float = 1.0   # planned to this fraction of each top acceleration [1]
     lead: str = DEFAULT_LEAD      # the engine's lead mode the show was planned for
+    rate_max: float = 1.0         # ... and the fastest playback rate [1] (figure's follow.rate_max)
 
     @property
     def infeasible(self) -> list[InfeasibleSegment]:
@@ -125,7 +126,8 @@ class ShapeReport:
             lines.append(f"  {a.axis:<18}{a.unit:>5}{a.prominence:>12.4g}{a.extrema:>9d}"
                          f"{a.segments:>7d}{len(a.infeasible):>12d}"
                          f"{a.peak_speed / a.max_speed:>11.2f}{a.peak_accel / a.max_accel:>11.2f}")
-        lines.append(f"  planned for the engine's command with lead {self.lead}"
+        lines.append(f"  planned for the engine's command with lead {self.lead} at rates up to "
+                     f"{self.rate_max:g}"
                      + (f", to {self.accel_fraction:g} of each top acceleration"
                         if self.accel_fraction != 1.0 else ""))
         again = [f"{a.axis} {a.headroom:.2f}" for a in self.axes if a.retried]
@@ -176,18 +178,21 @@ _ACTIONS = {_shape.ACT_REDUCED: "reduced", _shape.ACT_BORROWED: "borrowed",
             _shape.ACT_BORROWED | _shape.ACT_REDUCED: "borrowed+reduced"}
 
 
-def command_model(axis, lead: str, period: float) -> tuple[float, float, int]:
+def command_model(axis, lead: str, period: float, rate: float = 1.0) -> tuple[float, float, int]:
     """How the engine turns the show into axis's command (ext/mar_engine.c,
-    mar_engine_create): (lag feed-forward [s], how far ahead it samples [s],
-    the first tick a move may leave so that the first command is at rest
-    [tick]: the cubic interpolation at ahead/period reads two samples on; 0
-    when the engine commands the samples themselves)."""
+    mar_engine_create) when it plays at rate [1]: (lag feed-forward [s of
+    show], how far ahead it samples [s of show], the first tick a move may
+    leave so that the first command is at rest [tick]: the cubic
+    interpolation at ahead/period reads two samples on; 0 when the engine
+    commands the samples themselves). At rate r the command is that of the
+    show played at rate 1 with r times the lag and the lead, r times the
+    speed and r^2 times the acceleration."""
     if lead not in LEAD_MODES:
         raise ArgumentError(f"lead must be one of {sorted(LEAD_MODES)}, not {lead!r}")
     lag = axis.time_constant if lead == "dead_time_lag" else 0.0
     ahead = {"none": 0.0, "mean_delay": axis.dead_time + axis.time_constant,
              "dead_time_lag": axis.dead_time}[lead]
-    return lag, ahead, int(math.floor(ahead / period)) + 2 if ahead > 0 else 0
+    return rate * lag, rate * ahead, int(math.floor(rate * ahead / period)) + 2 if ahead > 0 else 0
 
 
 def position_margin(axis, lag: float, accel: float, period: float) -> float:
@@ -196,6 +201,46 @@ def position_margin(axis, lag: float, accel: float, period: float) -> float:
     planned acceleration [unit/s^2]), and the limiter's braking bound wants
     about one tick at top acceleration more (max_accel * period^2)."""
     return 0.5 * lag * lag * accel + axis.max_accel * period * period
+
+
+def plan_limits(axis, headroom: float, accel_fraction: float, rate: float) -> tuple[float, float]:
+    """(speed [unit/s], acceleration [unit/s^2]) an axis's moves are planned to,
+    before the lag's share (mar_shape_lag_limits), for playback at up to rate."""
+    return headroom * axis.max_speed / rate, headroom * accel_fraction * axis.max_accel / rate**2
+
+
+def first_headroom(axis, lead: str, period: float) -> float:
+    """The headroom [1] of an axis's first plan: exact where the engine commands the
+    samples themselves, else room for its cubic interpolation."""
+    return HEADROOM_EXACT if command_model(axis, lead, period)[1] == 0 else HEADROOM
+
+
+def move_reach(axis, durations, period: float, lead: str, accel_fraction: float,
+               rate: float) -> np.ndarray:
+    """How far [unit] a shaped move of each duration [s] reaches on axis, as
+    shape_show first plans it for lead and playback at up to rate (the
+    figure's follow.rate_max): a move to a point that far, or nearer, in that
+    time is not cut (the teach-in sizes the turn back of a folded rotation
+    with it)."""
+    lag = command_model(axis, lead, period, rate)[0]
+    vmax, amax = plan_limits(axis, first_headroom(axis, lead, period), accel_fraction, rate)
+    return np.array([_shape.reach_lag(float(d), vmax, amax, lag)[0]
+                     for d in np.atleast_1d(durations)])
+
+
+def last_departure(x, axis, period: float, lead: str, rate: float) -> int:
+    """The sample at which shape_show's move up to the last sample of x [unit]
+    leaves (the end of the previous point of rest's rest, default prominence and
+    rest tolerance), when x is the start of a show played at up to rate."""
+    span = axis.max - axis.min
+    status, points = _shape.extrema(np.ascontiguousarray(x, dtype=float),
+                                    DEFAULT_PROMINENCE * span, DEFAULT_REST_TOLERANCE * span)
+    if status < 0 or len(points) < 2:
+        return 0
+    depart = int(points["rest_end"][-2])
+    if len(points) == 2:                        # the first move waits for the lead
+        depart = max(depart, min(command_model(axis, lead, period, rate)[2], len(x) - 2))
+    return depart
 
 
 def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
@@ -215,8 +260,10 @@ def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
     accel_fraction (0 < f <= 1): plan to that fraction of each top
     acceleration. lead: the engine's lead mode the show will be played with
     (Engine(lead=...)); the moves are planned for the command it makes
-    (command_model), and the shaped show is played through the engine in
-    step mode at rate 1: an axis the limits would still cut is planned again
+    (command_model) at any rate up to the figure's follow.rate_max (a live
+    show follows the music's rate), and the shaped show is played through the
+    engine in step mode at rate 1 and at that rate: an axis the limits would
+    still cut is planned again
     with more headroom (HEADROOM_STEP, HEADROOM_TRIES), and what remains is
     reported (ShapeReport.limited).
 
@@ -235,9 +282,8 @@ def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
     shaped = np.empty_like(show.positions)
     axes = []
     for j in range(len(config.axes)):
-        exact = command_model(config.axes[j], lead, config.tick_period)[1] == 0
         shaped[j], ax = _shape_one(show, config, j, policy, proms[j], tols[j], accel_fraction,
-                                   lead, HEADROOM_EXACT if exact else HEADROOM)
+                                   lead, first_headroom(config.axes[j], lead, config.tick_period))
         axes.append(ax)
     for attempt in range(HEADROOM_TRIES + 1):
         found = {a.axis: a for a in _engine_limits(replace(show, positions=shaped), config, lead)}
@@ -251,7 +297,8 @@ def shape_show(show: Show, config: FigureConfig, policy: str = "reduce",
                                                 accel_fraction, lead, ax.headroom * HEADROOM_STEP)
                 axes[j].retried = True
     report = ShapeReport(policy=policy, show=show.path, figure=config.name, axes=axes,
-                         accel_fraction=accel_fraction, lead=lead)
+                         accel_fraction=accel_fraction, lead=lead,
+                         rate_max=config.follow.rate_max)
     bad = report.infeasible
     if policy == "reject" and bad:
         raise ShowError(f"{show.path}: {len(bad)} move(s) exceed the servo limits of "
@@ -271,8 +318,9 @@ def _shape_one(show: Show, config: FigureConfig, j: int, policy: str, prominence
     top speed and of accel_fraction times its top acceleration."""
     a = config.axes[j]
     T = config.tick_period
-    lag, _, first_depart = command_model(a, lead, T)
-    vmax, amax = headroom * a.max_speed, headroom * accel_fraction * a.max_accel
+    rate = config.follow.rate_max
+    lag, _, first_depart = command_model(a, lead, T, rate)
+    vmax, amax = plan_limits(a, headroom, accel_fraction, rate)
     status, out, points, moves = _shape.shape_axis(
         np.ascontiguousarray(show.positions[j]), T, vmax, amax, a.min, a.max, prominence,
         rest_tolerance, policy, lag, position_margin(a, lag, amax, T), first_depart)
@@ -300,12 +348,19 @@ def _shape_one(show: Show, config: FigureConfig, j: int, policy: str, prominence
 
 
 def _engine_limits(show: Show, config: FigureConfig, lead: str) -> list:
-    """Where the engine's limits cut the commands of show played at rate 1."""
-    with Engine(config, show, lead=lead, record=True) as engine:
-        engine.step(show.n_ticks)
-        records = engine.records()
-    return limited_axes(records, config.axis_names, [a.unit for a in config.axes],
-                        config.tick_period)
+    """Where the engine's limits cut the commands of show played at rate 1 or at
+    the figure's follow.rate_max (the axes limited at either, the larger count)."""
+    found = {}
+    for rate in (1.0, config.follow.rate_max):
+        with Engine(config, show, lead=lead, record=True) as engine:
+            engine.set_rate(rate)
+            engine.step(math.ceil(show.n_ticks / rate))
+            records = engine.records()
+        for a in limited_axes(records, config.axis_names, [a.unit for a in config.axes],
+                              config.tick_period):
+            if a.axis not in found or a.ticks > found[a.axis].ticks:
+                found[a.axis] = a
+    return [found[name] for name in config.axis_names if name in found]
 
 
 def _status_text(status: int) -> str:

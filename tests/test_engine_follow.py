@@ -64,9 +64,13 @@ def test_the_music_drives_the_show(taught, mode):
         # fractional steps near the tape's speed: never a doubled (0) or skipped (2) sample
         assert np.all((steps > 0.9) & (steps < 1.2)), (steps.min(), steps.max())
         assert abs(np.median(steps) - 1.03) < 0.005
-        # and the commands are the show sampled there
+        # and the commands are the show sampled there, at the engine's clock,
+        # which follows the music's corrections smoothly (ext/mar_clock.h):
+        # within a third of a tick (7 ms; 0.22 tick here), mostly within 0.05
         expected = np.interp(r["position"][after], np.arange(show.n_ticks), show.positions[0])
-        np.testing.assert_allclose(r["command"][after, 0], expected, atol=1e-9)
+        slope = np.abs(np.diff(show.positions[0])).max()                 # [unit/tick]
+        off = np.abs(r["command"][after, 0] - expected) / slope             # [ticks], at least
+        assert off.max() < 0.33 and np.median(off) < 0.05, (off.max(), np.median(off))
     else:
         assert set(np.unique(steps)) <= {0.0, 1.0, 2.0} and 2.0 in steps
     assert np.all(np.isfinite(r["follow_confidence"]))

@@ -109,6 +109,28 @@ def test_stop_ramp_decelerates_at_the_limit_without_reversing(rng):
     check_limits(config, r["command"], ramp[:, 0])
 
 
+def test_stop_ramps_are_not_counted_as_limited():
+    """Stop ramps from 18 places of the shaped bundled demo: planned a hair inside
+    the limits, the limiter does not count their ticks as cut (rounding at the
+    bound counted 104 axis-ticks when they were planned at the limits)."""
+    from marionette import load_config, load_show
+    from marionette.demo import DEMO_SHOW
+    from marionette.shape import shape_show
+    config = load_config()
+    show, _ = shape_show(load_show(DEMO_SHOW, config), config)
+    moving = 0
+    for at in range(60, 1000, 52):
+        with Engine(config, show, record=True) as engine:
+            engine.step(at)
+            engine.stop_motion()
+            engine.step(100)
+            r = engine.records()
+        assert not np.any(r["excess"]), at
+        assert np.all(r["flags"][-1] & FLAG_HOLDING)
+        moving += np.any(np.abs(np.diff(r["command"][at - 2:at + 1], axis=0)) > 1e-6)
+    assert moving > 15                          # the ramps start from a moving figure
+
+
 def test_blend_in_from_home_then_play(rng):
     config = make_figure(3)
     show = make_show(config, smooth_dance(config, 500, rng, fraction=0.8))

@@ -7,6 +7,7 @@ motion with |a| <= amax has |x[k+1] - 2x[k] + x[k-1]| <= amax*T^2 per step
 (the second difference is a hat-weighted mean of the acceleration) and
 |x[k+1] - x[k]| <= vmax*T, so those hold too, up to rounding.
 """
+import dataclasses
 import errno
 
 import numpy as np
@@ -39,14 +40,23 @@ def check_profile(p, vmax, amax, n=257):
     assert np.all(np.abs(v) <= vmax * (1 + REL)) and np.all(np.abs(a) <= amax * (1 + REL))
     lo, hi = min(p["x0"], p["x1"]), max(p["x0"], p["x1"])
     assert np.all((x >= lo) & (x <= hi))
-    # the parameters describe the distance covered
+    # the parameters describe the distance covered: the core's, which lasts the
+    # duration less half the window at each end at rest, and reaches beyond an
+    # open end by the moving average's shift of a parabola
     d = abs(p["x1"] - p["x0"])
-    assert p["peak_speed"] * (p["duration"] - p["ramp"]) == pytest.approx(d, rel=1e-9, abs=1e-15)
+    opens, opene = int(p["open"]) & _shape.OPEN_START, int(p["open"]) & _shape.OPEN_END
+    w = p["smooth"]
+    core = p["duration"] - (0 if opens else w / 2) - (0 if opene else w / 2)
+    dc = d + (p["accel"] * bool(opens) + p["accel_end"] * bool(opene)) * w * w / 24
+    assert p["peak_speed"] * (core - 0.5 * p["ramp"] - 0.5 * p["ramp_end"]) == pytest.approx(
+        dc, rel=1e-9, abs=1e-15)
+    assert p["accel_end"] <= amax * (1 + REL)
     # velocity is the derivative of position
     dx = np.diff(x) / np.diff(t)
     vm = 0.5 * (v[1:] + v[:-1])
     dt = t[1] - t[0]                  # exact for quadratics, off by < a*dt at a corner
-    assert np.allclose(dx, vm, rtol=1e-6, atol=p["accel"] * dt + 1e-14 * (1 + np.abs(x).max()) / dt)
+    top = max(p["accel"], p["accel_end"])
+    assert np.allclose(dx, vm, rtol=1e-6, atol=top * dt + 1e-14 * (1 + np.abs(x).max()) / dt)
 
 
 def check_sampled(x, T, vmax, amax):
@@ -286,7 +296,10 @@ def test_axis_errors():
 # ---------------------------------------------------------------- shows
 
 def fast_show():
+    """A figure whose shows are planned for rate 1 only (follow.rate_max 1), so the
+    moves are planned to its bare limits (with lead none)."""
     config = make_figure(2, max_speed=2.0, max_accel=12.0)
+    config = dataclasses.replace(config, follow=dataclasses.replace(config.follow, rate_max=1.0))
     slow = 0.5 * np.sin(2 * np.pi * 0.3 * np.arange(400) * 0.02)
     drop = np.concatenate([0.9 * plateau_then_drop(), np.zeros(400 - 145)])
     return config, make_show(config, [slow, drop])

@@ -1,6 +1,8 @@
 """Shaping for the engine's command: a shaped show plays through the engine
 with its hard limiter idle, the climaxes reach the simulated servos on time,
 and play's summary names where the limits did act."""
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -66,6 +68,74 @@ def test_shaped_random_shows_leave_the_limiter_idle(lead):
         with Engine(config, taught, lead=lead, record=True) as engine:
             engine.step(taught.n_ticks)
             assert engine.stats()["limited"] > 0
+
+
+def test_turns_share_their_acceleration_and_keep_the_commands_limits():
+    """300 random axes shaped for a lag, evaluated densely move by move: where two
+    moves turn at a climax they meet with velocity 0 and one acceleration, not 0
+    (most climaxes without a rest turn so); the command x + lag*x' keeps vmax and
+    amax everywhere, across the turns too."""
+    rng = np.random.default_rng(SEED)
+    turns = flat = 0
+    for case in range(300):
+        T, n = 0.02, int(rng.integers(100, 600))
+        vmax, amax, lag = rng.uniform(0.3, 3.0), rng.uniform(1.0, 20.0), rng.uniform(0.02, 0.25)
+        k = np.arange(n)
+        x = sum(rng.uniform(0.1, 1.0) * np.sin(2 * np.pi * k / rng.uniform(20, 300) + rng.uniform(0, 6.3))
+                for _ in range(3))
+        st, out, pts, mv = _shape.shape_axis(x, T, vmax, amax, -5.0, 5.0, 0.05 * np.ptp(x), 0.0,
+                                             "reduce", lag, 0.0, 0)
+        assert st >= 0
+        for a, b in zip(mv[:-1], mv[1:]):
+            if a["arrive_tick"] != b["depart_tick"] or (a["x1"] - a["x0"]) * (b["x1"] - b["x0"]) >= 0:
+                continue
+            t, eps = b["t0"], 1e-7                  # the climax, and just before and after [s]
+            xa, va, aa = _shape.evaluate(a, [t - eps])
+            xb, vb, ab = _shape.evaluate(b, [t + eps])
+            if a["open"] & _shape.OPEN_END:
+                assert b["open"] & _shape.OPEN_START
+                assert abs(va[0]) <= 2 * eps * abs(aa[0]) and abs(vb[0]) <= 2 * eps * abs(ab[0])
+                assert aa[0] == pytest.approx(ab[0], rel=1e-6) and aa[0] != 0
+                assert np.sign(aa[0]) == -np.sign(a["x1"] - a["x0"])
+                assert xa[0] == pytest.approx(a["x1"], abs=eps ** 2 * abs(aa[0]) + 1e-12)
+                turns += 1
+            else:
+                assert not b["open"] & _shape.OPEN_START
+                flat += 1
+        # the command, densely, over the whole axis
+        t = np.linspace(0.0, (n - 1) * T, 40 * n)
+        pos, vel, acc = np.full(t.size, x[0]), np.zeros(t.size), np.zeros(t.size)
+        for m in mv:
+            inside = (t >= m["t0"]) & (t <= m["t0"] + m["duration"])
+            pos[inside], vel[inside], acc[inside] = _shape.evaluate(m, t[inside])
+        speed = vel + lag * acc
+        dt = t[1] - t[0]
+        assert np.all(np.abs(speed) <= vmax * (1 + 1e-9)), (case, np.abs(speed).max() / vmax)
+        # a corner of the acceleration is a step of the jerk: np.gradient averages over it
+        accel = np.gradient(speed, dt)[1:-1]
+        assert np.all(np.abs(accel) <= amax * (1 + 1e-6)), (case, np.abs(accel).max() / amax)
+    assert turns > 5 * flat and turns > 1000, (turns, flat)
+
+
+def test_shaped_shows_leave_the_limiter_idle_at_every_rate_the_follower_allows():
+    """Random dances shaped for the figure's follow.rate_max (1.1): played at 0.94,
+    1.06 and 1.1 the limits never act; shaped for rate 1 only, at 1.1 they do."""
+    config = load_config()
+    rate1 = dataclasses.replace(config, follow=dataclasses.replace(config.follow, rate_max=1.0))
+    for seed in range(SEED, SEED + 4):
+        taught = climax.random_dance(config, 8.0, seed)
+        shaped, report = shape_show(taught, config)
+        assert report.rate_max == 1.1 and "at rates up to 1.1" in str(report)
+        for rate in (0.94, 1.06, 1.1):
+            assert limited_at(shaped, config, rate) == 0, (seed, rate)
+        assert limited_at(shape_show(taught, rate1)[0], config, 1.1) > 0, seed
+
+
+def limited_at(show, config, rate):
+    with Engine(config, show, record=True) as engine:
+        engine.set_rate(rate)
+        engine.step(int(np.ceil(show.n_ticks / rate)))
+        return int(np.count_nonzero(engine.records()["excess"]))
 
 
 def test_climaxes_land_within_a_tick_on_the_simulated_servos():

@@ -21,24 +21,27 @@
    first-order lag ``axis.time_constant``, on a fine internal step of
    period/SUBSTEPS (exact discretisation of the lag).
 5. For every climax (an interior extremum of the shaped trajectory) the
-   timing error [ticks] is the shift of the servo's motion around it against
-   the shaped trajectory's (evaluated exactly from its moves): the shift, on
-   the fine grid and refined by a parabola, that best aligns the two over
-   the ticks within ALIGN_TICKS of the climax (and no nearer a neighbouring
-   climax than half-way). A shaped show arrives at each climax at rest with
-   no acceleration (the command x + tau*x' must stay within the limits), so
-   its extremum is flat: within a tick of it the position changes by
-   micrometres, less than the engine's cubic interpolation errs by, and the
-   servo's extremum alone times it to no better than a tick or two. The
-   extremum's time (the servo's extremum of the same kind nearest the climax
-   tick, refined by a parabola) is reported beside it, ``extremum_*``.
+   timing error [ticks] is the time of the servo's extremum of the same kind
+   nearest the climax tick (between the neighbouring climaxes, refined by a
+   parabola), less the climax tick: where the servo's motion turns, as the
+   issue measures it. The shaper makes a climax where the figure turns the
+   vertex of a parabola (the moves on either side share their acceleration
+   there), so that extremum is sharp; where two moves cannot share one (a
+   fast move next to a slow one) the climax stays flat, at rest with no
+   acceleration, and its extremum lies where micrometre errors put it.
+   Beside it, ``alignment_*``: the shift, on the fine grid and refined by a
+   parabola, that best aligns the servo's motion with the shaped
+   trajectory's (evaluated exactly from its moves) over the ticks within
+   ALIGN_TICKS of the climax (and no nearer a neighbouring climax than
+   half-way): it times a flat climax too.
    A climax whose excursion was reduced so far that it is no longer an
    extremum of the shaped trajectory is not timed (climaxes counts the rest).
 
 Target: max |error| <= 1 tick with compensation. JSON keys:
 climax_error_ticks_max_compensated, climax_error_ticks_median_compensated,
 climax_error_ticks_max_uncompensated, climax_error_ticks_median_uncompensated,
-extremum_error_ticks_max_* and _median_* (both leads),
+alignment_error_ticks_max_* and _median_* (both leads), turning (climaxes
+that turn, of climaxes),
 limited_axis_ticks_compensated, limited_axis_ticks_uncompensated, plus
 climaxes, infeasible (of the compensated shaping), seconds, seed,
 target_ticks, target_met.
@@ -224,7 +227,7 @@ def climax_timing(config: FigureConfig | None = None, seed: int = SEED,
             x = shaped_fine(moves, shaped.n_ticks, T, substeps)
             aligned.append(_aligned_shifts(y, x, ticks, substeps))
             extremum.append(_climax_times(y, kinds, ticks, substeps) - ticks)
-        for key, errors in (("climax", aligned), ("extremum", extremum)):
+        for key, errors in (("climax", extremum), ("alignment", aligned)):
             err = np.abs(np.concatenate(errors))
             missing = int(np.count_nonzero(np.isnan(err)))
             err = err[~np.isnan(err)]
@@ -233,6 +236,8 @@ def climax_timing(config: FigureConfig | None = None, seed: int = SEED,
             result[f"{key}_unmatched_{label}"] = missing
     result.update(
         climaxes=int(sum(len(shaped_climaxes(a.points, a.moves)[0]) for a in report.axes)),
+        turning=int(sum(np.count_nonzero(np.isin(a.moves["arrive_tick"], shaped_climaxes(
+            a.points, a.moves)[0]) & (a.moves["open"] & _shape.OPEN_END > 0)) for a in report.axes)),
         moves=report.segments, infeasible=len(report.infeasible), seconds=seconds, seed=seed,
         figure=config.name, target_ticks=TARGET_TICKS,
         target_met=bool(result["climax_error_ticks_max_compensated"] <= TARGET_TICKS))
@@ -241,18 +246,19 @@ def climax_timing(config: FigureConfig | None = None, seed: int = SEED,
 
 def format_table(r: dict) -> str:
     lines = [f"climax timing on {r['figure']}: {r['climaxes']} climaxes in a {r['seconds']:g} s "
-             f"random dance (seed {r['seed']}), {r['infeasible']} of {r['moves']} moves infeasible "
-             f"(reduced) when shaped for dead_time_lag",
-             f"  {'lead':<16}{'max |error| [ticks]':>22}{'median':>9}{'extremum max':>14}"
+             f"random dance (seed {r['seed']}), {r['turning']} of them turning (the rest flat), "
+             f"{r['infeasible']} of {r['moves']} moves infeasible (reduced) when shaped for "
+             "dead_time_lag",
+             f"  {'lead':<16}{'max |error| [ticks]':>22}{'median':>9}{'alignment max':>15}"
              f"{'median':>9}{'limited':>10}"]
     for label, lead in (("compensated", "dead_time_lag"), ("uncompensated", "none")):
         lines.append(f"  {lead:<16}{r[f'climax_error_ticks_max_{label}']:>22.3f}"
                      f"{r[f'climax_error_ticks_median_{label}']:>9.3f}"
-                     f"{r[f'extremum_error_ticks_max_{label}']:>14.3f}"
-                     f"{r[f'extremum_error_ticks_median_{label}']:>9.3f}"
+                     f"{r[f'alignment_error_ticks_max_{label}']:>15.3f}"
+                     f"{r[f'alignment_error_ticks_median_{label}']:>9.3f}"
                      f"{r[f'limited_axis_ticks_{label}']:>10d}")
-    lines.append("  error: the shift that aligns the servo's motion near each climax with the "
-                 "show's; extremum: the servo's extremum's time (docstring)")
+    lines.append("  error: the servo's extremum's time less the climax's; alignment: the shift "
+                 "that aligns the servo's motion near each climax with the show's (docstring)")
     lines.append(f"  target: max <= {r['target_ticks']:g} tick compensated: "
                  f"{'met' if r['target_met'] else 'MISSED'}")
     return "\n".join(lines)

@@ -26,7 +26,7 @@ from marionette.music.bands import wav_bands
 from marionette.music.feature import wav_frames
 from marionette.music.report import TAUGHT_SHORT_SHARE, recording_warnings
 from marionette.progress import Progress
-from marionette.shape import POLICIES, shape_show
+from marionette.shape import POLICIES, last_departure, move_reach, shape_show
 from marionette.show import LIMIT_POLICIES, Show, fit_to_figure
 from marionette.teach.axis_map import TURN, fold_turns, map_axes, unwind
 from marionette.teach.camera_file import CameraFileError, read_cameras
@@ -46,7 +46,6 @@ STAGES = (
     ("mapped", "tick", "resampled to the tick and mapped to the axis"),
     ("shaped", "tick", "shaped: parabolic moves between points of rest (pragmatic filter)"),
 )
-UNWIND_SPEED = 0.8       # turning back a folded rotation: of the axis's top speed [1]
 STEPS = ("settings", "cameras", "recording", "poses", "axes", "shaping", "music", "writing")
 
 
@@ -134,7 +133,8 @@ def _teach(args, progress: Progress) -> int:
     stage_values = {key: _map_stage(getattr(stages, key), amap, names, home)
                     for key, base, _ in STAGES if base == "set"}
     stage_values["mapped"] = _map_stage(stages.resampled, amap, names, home)
-    _fold_rotation(stage_values["mapped"], config, amap.rotation_name, stages.tick_times)
+    _fold_rotation(stage_values["mapped"], config, amap.rotation_name, stages.tick_times,
+                   args.lead, args.accel_fraction)
     show = Show(axis_names=list(names), units=[a.unit for a in config.axes],
                 positions=stage_values["mapped"].copy(), loudness=np.zeros(stages.tick_times.size),
                 tick_period=config.tick_period,
@@ -177,11 +177,13 @@ def _teach(args, progress: Progress) -> int:
     return 0
 
 
-def _fold_rotation(mapped: np.ndarray, config, name: str, times: np.ndarray) -> None:
+def _fold_rotation(mapped: np.ndarray, config, name: str, times: np.ndarray, lead: str,
+                   accel_fraction: float) -> None:
     """Fold the rotation axis (a row of ``mapped``, changed in place) into its limits by
     whole turns when the dancer turned further than the axis reaches, turning back at
-    each wrap, and say so on stderr. An axis with less than a full turn of range is
-    left to the limits check."""
+    each wrap, and say so on stderr. Each turn back is as long as the pragmatic filter
+    needs to plan it as one move for lead (shape.move_reach), so shaping does not cut
+    it. An axis with less than a full turn of range is left to the limits check."""
     if name not in config.axis_names:
         return
     j = config.axis_names.index(name)
@@ -190,13 +192,17 @@ def _fold_rotation(mapped: np.ndarray, config, name: str, times: np.ndarray) -> 
     if axis.max - axis.min < TURN or (yaw.min() >= axis.min and yaw.max() <= axis.max):
         return
     fold = fold_turns(yaw, axis.min, axis.max)
-    mapped[j] = unwind(fold.values, fold.wraps, UNWIND_SPEED * axis.max_speed, config.tick_period)
+    T = config.tick_period
+    rate = config.follow.rate_max
+    mapped[j] = unwind(fold.values, fold.wraps,
+                       lambda d: move_reach(axis, d, T, lead, accel_fraction, rate), T,
+                       lambda x: last_departure(x, axis, T, lead, rate))
     at = ", ".join(f"{times[k]:.2f} s" for k in fold.wraps[:5]) + (", ..." if fold.wraps.size > 5 else "")
     print(f"warning: axis {name!r}: the dancer's yaw spans {(yaw.max() - yaw.min()) / TURN:.1f} turns "
           f"(from {yaw.min():.3g} to {yaw.max():.3g} {axis.unit}), beyond its limits "
           f"[{axis.min!r}, {axis.max!r}]; folded by whole turns with {fold.wraps.size} wrap(s)"
-          + (f" (at {at}), where the figure turns back at up to {UNWIND_SPEED:.0%} of its top "
-             "speed until it meets the dancer's orientation again" if fold.wraps.size else ""),
+          + (f" (at {at}), where the figure turns back, as fast as a shaped move may, until "
+             "it meets the dancer's orientation again" if fold.wraps.size else ""),
           file=sys.stderr, flush=True)
 
 

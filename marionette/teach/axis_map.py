@@ -219,24 +219,44 @@ def fold_turns(angle, lo: float, hi: float) -> Fold:
     return Fold(values, turns, np.array(wraps, int))
 
 
-def unwind(values, wraps, max_speed: float, dt: float) -> np.ndarray:
+def unwind(values, wraps, reach, dt: float, departs=None) -> np.ndarray:
     """Replace the jump of a whole turn at each wrap of a folded rotation ``values`` (K,)
-    [rad] by a straight run back at no more than ``max_speed`` [rad/s] (samples ``dt``
-    [s] apart) that ends where it meets the folded rotation again; one that cannot meet
-    it before the next wrap or the last sample runs at that speed towards it until
-    then.  The run lies between two values inside the range, so it stays inside; the
-    figure shows the turn back instead of a jump that no servo can follow (the
-    pragmatic filter would hold the figure still in its place)."""
+    [rad] by a turn back: a straight run back from the turn's top that ends where it
+    first meets the folded rotation again within ``reach``.  ``reach(durations)`` [rad]
+    is how far a run may go in each duration [s] (samples ``dt`` [s] apart), e.g.
+    ``lambda d: speed * d``, or the pragmatic filter's (marionette.shape.move_reach),
+    so that the filter plans each run as one move that fits its time.  A run that
+    cannot meet the rotation before the next wrap or the last sample goes as far as
+    ``reach`` allows towards it until then.
+
+    ``departs(x)``, if given, is the sample at which the filter's move up to the last
+    sample of ``x`` leaves (marionette.shape.last_departure): where the rise into a
+    wrap from there is farther than ``reach`` in its time (the dancer turns faster
+    than the figure can), the top is reached later, on a straight run, and the turn
+    back starts there; the top is the figure's own, no climax of the dance, so it is
+    moved in time rather than cut.  Every run lies between two values inside the
+    range, so it stays inside; the figure shows the turn back instead of a jump that
+    no servo can follow."""
     out = np.array(values, float)
     ends = list(wraps[1:]) + [out.size - 1]
+    begin = 0                                   # where the rise into the next wrap may start
     for k, end in zip(wraps, ends):
-        start = out[k - 1]
-        reach = max_speed * dt * np.arange(1, end - k + 2)   # run's length at k..end [rad]
-        met = np.flatnonzero(np.abs(out[k:end + 1] - start) <= reach)
+        top, apex = out[k - 1], k - 1           # [rad], [sample]
+        if departs is not None:
+            d = begin + int(departs(out[begin:k]))
+            fits = np.flatnonzero(reach(dt * np.arange(1, end - d + 1)) >= abs(top - out[d]))
+            late = min(d + 1 + int(fits[0]) if fits.size else end, end - 1)
+            if late > apex:                     # a straight rise to the top, reached late
+                apex = late
+                out[d + 1:apex + 1] = out[d] + (top - out[d]) * np.arange(1, apex - d + 1) / (apex - d)
+        far = np.asarray(reach(dt * np.arange(1, end - apex + 1)), float)   # at apex+1..end [rad]
+        met = np.flatnonzero(np.abs(out[apex + 1:end + 1] - top) <= far)
         if met.size:
             steps = met[0] + 1
-            out[k:k + met[0]] = start + (out[k + met[0]] - start) * np.arange(1, steps) / steps
+            out[apex + 1:apex + steps] = top + (out[apex + steps] - top) * np.arange(1, steps) / steps
+            begin = apex + steps
         else:
             goal = out[end]
-            out[k:end + 1] = start + np.sign(goal - start) * np.minimum(reach, abs(goal - start))
+            out[apex + 1:end + 1] = top + np.sign(goal - top) * np.minimum(far, abs(goal - top))
+            begin = end
     return out

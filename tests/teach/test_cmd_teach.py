@@ -96,7 +96,9 @@ def test_shaped_show_plays_and_carries_the_music(taught):
     assert show.music == str(taught.directory / "music.wav")
     assert show.source.startswith("teach-in of") and "shaped" in show.source
     # the pragmatic filter keeps the servo limits and stays near the dance
-    # (within 20 % of each axis's range; measured up to 14 %: the moves cut small wiggles)
+    # (within 25 % of each axis's range; measured up to 22 %, on x, planned for playback
+    # at up to the follower's rate_max 1.1: 15 % planned for rate 1; the moves cut
+    # small wiggles and reduce climaxes the servo cannot reach in time)
     t = np.arange(show.n_ticks) * show.tick_period
     truth = _truth(taught.sample, t, load_settings())
     inner = (t > MARGIN) & (t < t[-1] - MARGIN)
@@ -106,7 +108,7 @@ def test_shaped_show_plays_and_carries_the_music(taught):
         speed = np.abs(np.diff(x)) / show.tick_period
         assert speed.max() <= axis.max_speed * (1 + 1e-9), axis.name
         err = np.abs(x[inner] - truth[axis.name][inner])
-        assert err.max() < 0.2 * (axis.max - axis.min), axis.name
+        assert err.max() < 0.25 * (axis.max - axis.min), axis.name
     # the stages are stored alongside and agree with the show
     with np.load(taught.show) as z:
         assert [str(n) for n in z["stage_names"]] == ["raw", "complemented", "bridged", "lowpass",
