@@ -11,7 +11,7 @@ from marionette.errors import MarionetteError
 
 PACKAGE = Path(marionette.__file__).parent
 # modules that need an optional extra or a display to import
-OPTIONAL = {"marionette.music.sound_card", "marionette.bench.console_cost"}
+OPTIONAL = {"marionette.music.sound_card"}
 
 
 def _modules():

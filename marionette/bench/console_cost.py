@@ -1,17 +1,18 @@
-"""The live console's cost: the tick's wake latency with and without it, in one run.
+"""``marionette bench console-cost``: the live console's cost, the tick's wake latency with and without it, in one run.
 
-    python -m marionette.bench.console_cost [--segment 10] [--pairs 2] [--json FILE]
+    marionette bench console-cost [--segment 10] [--pairs 2] [--priority 80] [--json]
 
 Run it in a terminal (the console draws on stdout). One engine plays the
 bundled demo show at half rate in one real-time loop; the run alternates
 segments without and with the console (without, with, without, ...), and
 the wake-latency histogram of each kind is the sum of the differences of the
 engine's histogram at the segment boundaries. docs/console.md has the
-numbers.
+numbers. With --json the result is printed as JSON once the console has
+closed. No target: on a shared machine the wake latency's own noise is
+larger than the console's cost (docs/console.md).
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -19,10 +20,13 @@ import warnings
 
 import numpy as np
 
+from marionette.bench._machine import describe, machine_info
+from marionette.cli.options import Number
 from marionette.config import load_config
 from marionette.console import Console
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
+from marionette.errors import ArgumentError
 from marionette.show import load_show
 
 
@@ -35,16 +39,21 @@ def quantile_us(lower, width, counts, q: float) -> float:
     return float(lower[i] + width[i] / 2) / 1e3
 
 
-def main(argv=None) -> int:
-    p = argparse.ArgumentParser(prog="python -m marionette.bench.console_cost", description=__doc__)
-    p.add_argument("--segment", type=float, default=10.0, help="length of one segment [s]")
-    p.add_argument("--pairs", type=int, default=2, help="pairs of segments (without, with)")
-    p.add_argument("--priority", type=int, default=80)
-    p.add_argument("--json", metavar="FILE", help="also write the result to FILE as JSON")
-    args = p.parse_args(argv)
+def register(sub) -> None:
+    p = sub.add_parser("console-cost", help="the live console's cost on the tick's wake latency",
+                       description=__doc__.split("\n\n")[0])
+    p.add_argument("--segment", type=Number(float, 1.0), default=10.0, metavar="S",
+                   help="length of one segment [s]")
+    p.add_argument("--pairs", type=Number(int, 1), default=2, metavar="N",
+                   help="pairs of segments (without, with)")
+    p.add_argument("--priority", type=Number(int, 1, 99), default=80, metavar="P",
+                   help="SCHED_FIFO priority of the tick (refused without the right: then SCHED_OTHER)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON once the console has closed")
+
+
+def run(args) -> int:
     if not sys.stdout.isatty():
-        print("run this in a terminal: the console draws on stdout", file=sys.stderr)
-        return 2
+        raise ArgumentError("bench console-cost: run it in a terminal (the console draws on stdout)")
     config = load_config(None)
     show = load_show(DEMO_SHOW, config)
     sums = {"without": None, "with": None}
@@ -69,7 +78,7 @@ def main(argv=None) -> int:
                 segments.append((kind, round(quantile_us(lower, width, part, 0.99), 1)))
                 before = after
         stats = engine.stats()
-    out = {"segment_s": args.segment, "pairs": args.pairs, "fifo": bool(report["fifo"]),
+    out = {"machine": machine_info(), "segment_s": args.segment, "pairs": args.pairs, "fifo": bool(report["fifo"]),
            "priority": args.priority if report["fifo"] else 0, "overruns": stats["overruns"],
            "refused": [str(w.message) for w in refused], "segments_p99_us": segments}
     for kind, counts in sums.items():
@@ -78,8 +87,10 @@ def main(argv=None) -> int:
                         for q in (0.5, 0.99, 0.999)}}
     out["p99_change_us"] = round(out["with"]["p99_us"] - out["without"]["p99_us"], 1)
     if args.json:
-        with open(args.json, "w") as f:
-            json.dump(out, f)
+        json.dump(out, sys.stdout, indent=2)
+        sys.stdout.write("\n")
+        return 0
+    print(f"machine: {describe(out['machine'])}")
     for kind in ("without", "with"):
         o = out[kind]
         print(f"{kind:>8} console: {o['ticks']} ticks, wake p50 {o['p50_us']:.1f} us, "
@@ -88,6 +99,12 @@ def main(argv=None) -> int:
     print(f"p99 change {out['p99_change_us']:+.1f} us; SCHED_FIFO {out['fifo']}; "
           f"overruns {out['overruns']}")
     return 0
+
+
+def main(argv=None) -> int:
+    """``python -m marionette.bench.console_cost``: as ``marionette bench console-cost``."""
+    from marionette.cli import main as cli_main
+    return cli_main(["bench", "console-cost", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":
