@@ -1,14 +1,14 @@
 """``marionette bench console-cost``: the live console's cost, the tick's wake latency with and without it, in one run.
 
-    marionette bench console-cost [--segment 10] [--pairs 2] [--priority 80] [--json]
+    marionette bench console-cost [--segment 10] [--pairs 2] [--priority 80] [--json FILE]
 
 Run it in a terminal (the console draws on stdout). One engine plays the
 bundled demo show at half rate in one real-time loop; the run alternates
 segments without and with the console (without, with, without, ...), and
 the wake-latency histogram of each kind is the sum of the differences of the
 engine's histogram at the segment boundaries. docs/console.md has the
-numbers. With --json the result is printed as JSON once the console has
-closed. No target: on a shared machine the wake latency's own noise is
+numbers. --json FILE also writes the result to FILE as JSON (not to
+stdout, where the console draws). No target: on a shared machine the wake latency's own noise is
 larger than the console's cost (docs/console.md).
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ import warnings
 import numpy as np
 
 from marionette.bench._machine import describe, machine_info
-from marionette.cli.options import Number
+from marionette.cli.options import Number, output_file
 from marionette.config import load_config
 from marionette.console import Console
 from marionette.demo import DEMO_SHOW
@@ -48,7 +48,8 @@ def register(sub) -> None:
                    help="pairs of segments (without, with)")
     p.add_argument("--priority", type=Number(int, 1, 99), default=80, metavar="P",
                    help="SCHED_FIFO priority of the tick (refused without the right: then SCHED_OTHER)")
-    p.add_argument("--json", action="store_true", help="print the result as JSON once the console has closed")
+    p.add_argument("--json", type=output_file, metavar="FILE",
+                   help="also write the result to FILE as JSON (stdout is the console's)")
 
 
 def run(args) -> int:
@@ -87,9 +88,8 @@ def run(args) -> int:
                         for q in (0.5, 0.99, 0.999)}}
     out["p99_change_us"] = round(out["with"]["p99_us"] - out["without"]["p99_us"], 1)
     if args.json:
-        json.dump(out, sys.stdout, indent=2)
-        sys.stdout.write("\n")
-        return 0
+        with open(args.json, "w") as f:
+            json.dump(out, f, indent=2)
     print(f"machine: {describe(out['machine'])}")
     for kind in ("without", "with"):
         o = out[kind]
