@@ -125,10 +125,12 @@ CUE_LOCK_TOL_S = 0.05           # "locked at the cue": LOCKED this close to the 
 WRONG_CUE_DECKS = 2             # decks per piece and seed whose tape starts away from the cue [1]
 WRONG_CUE_START_S = (10.0, 60.0)  # their tape starts this far into the piece [s]
 
-TARGETS = (("within20", ">=", 0.95), ("within50", ">=", 0.99), ("within200", ">=", 1.0),
-           ("lock_s_max", "<=", 3.0), ("relock_after_pause_s_max", "<=", 0.5),
-           ("false_locks", "<=", 0), ("us_per_tick_median", "<=", 10.0),
-           ("us_per_tick_p99", "<=", 50.0))
+# issue 21's targets for the synthesized pieces (every run's within 50 ms
+# counted from 3 s, as every figure here, not from its lock: stricter)
+TARGETS = (("within20", ">=", 0.98), ("within50", ">=", 0.995), ("within50_run_min", ">=", 0.99),
+           ("within200", ">=", 1.0), ("lock_s_max", "<=", 3.0), ("relock_after_pause_s_max", "<=", 0.5),
+           ("false_locks", "<=", 0), ("us_per_tick_median", "<=", 20.0),
+           ("us_per_tick_p99", "<=", 200.0))
 CUE_TARGETS = (("within50", ">=", 0.99), ("cue_lock_s_max", "<=", 0.5), ("false_locks", "<=", 0))
 WRONG_CUE_TARGETS = (("later_s_max", "<=", 0.0), ("false_locks", "<=", 0))
 # real recordings: issue 21's targets, closer than the synthesized pieces'
