@@ -112,3 +112,4 @@ def test_bad_bands_are_refused():
     f = Follower(loud, bands=rows)
     out = f.step(0.1, bands=[0.1, 0.2, -0.3, 0.1, 0.1, 0.1])     # refused as a source would be
     assert out.flags & 1 and f.counters()["bad_input"] == 1
+
