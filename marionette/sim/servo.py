@@ -151,13 +151,11 @@ class ServoModel:
         top = self.max_speed[j] * self.step                                 # [unit] per step
         keep = 1.0 - self._alpha[j]                                         # of an unclipped gap
         clip = top / self._alpha[j]                                         # wider gaps move at top
-        if d >= n * top:
-            return y + sign * (clip + n * top)
         for m in range(n):                  # m steps at top speed, then the lag's decay
             gap = m * top + (d - m * top) / (1.0 - keep ** (n - m))
             if gap - m * top <= clip:
                 return y + sign * gap
-        return y + sign * (clip + n * top)
+        return y + sign * (clip + n * top)  # every step at top speed
 
     def release(self) -> None:
         """End a quick stop: hold the present position until new setpoints come."""

@@ -11,7 +11,7 @@ range, nor stop short of it by more, nor accelerate beyond its limit
 (docs/architecture.md, Stops).
 'quick stop': the nodes' own stop (ServoModel.brake), on an ESTOP or a
 watchdog trip, mid-motion: the same stop point, from where each drive is
-when the node brakes, and the same 1 % (SPEC.md 6, Watchdog)."""
+when the node brakes, and the same 1 % (SPEC.md 6, Quick stop)."""
 from dataclasses import replace
 
 import numpy as np
@@ -33,7 +33,7 @@ STOP_ACCEL_TOL = 1.2
 # the phase of its input's steps, where the measure gives the limit; the
 # input's velocity steps by about amax * tau at the start and the end, which
 # changes the drive's motion within each tick, so the measure at other phases
-# sees up to 12 % more below 70 % of the top speed, 19 % above
+# sees up to 12 % more below 70 % of the top speed, 18 % above
 QUICK_STOP_ACCEL_TOL = 1.2
 FAST = 0.7              # of the top speed
 SETTLE = 75             # ticks after the stop until the figure is judged at rest
