@@ -75,8 +75,8 @@ class SimNode:
         self.model.advance_to(t)
 
     def _ramp_to_rest(self) -> None:
-        """The drive's quick stop: every channel ramps its velocity to rest at
-        its acceleration limit from where it physically is, whatever
+        """The quick stop (SPEC.md 6): every channel's drive brakes at its
+        acceleration limit from its own motion to its stop point, whatever
         setpoints are still inside its dead time (ServoModel.brake)."""
         self.model.brake()
 

@@ -22,11 +22,15 @@ tick, averages past commands with non-negative weights).
 
 `brake()` is a drive's own quick stop (the node's e-stop and watchdog):
 from that step on the setpoints, also those still inside the dead time,
-are ignored; the lag's input goes on from where it is, one step a tick as
-the setpoints came, at its velocity over the last tick, and ramps to rest
-at the acceleration limit. The drive follows it through its lag, so it
-decelerates within the limit and comes to rest where the input does,
-without passing that point.
+are ignored. The stop point is where the drive itself comes to rest
+braking at its acceleration limit from its position and its velocity over
+the last tick; the drive is steered along that braking profile by
+inverting its lag: the lag's input goes on as a staircase in the phase of
+the setpoints it replaces, each step the input that, held until the next,
+brings the drive onto the profile. The first step comes at once and is
+held only until the next one is due. Braking the input instead of the
+drive, as before, let the drive, lagging tau * v behind it, pass its own
+stop point by that much.
 
 At a position limit the drive stops dead: the position is clipped and any
 velocity pointing out of the range is zeroed, at both limits alike.
@@ -80,12 +84,13 @@ class ServoModel:
         self.peak_accel = np.zeros(n)                                        # [unit/s^2]
         self._past = np.tile(x0, (2 * self.sample_steps + 1, 1))             # [unit]
         self._steps = 0                          # fine steps taken
-        self._brake_x = x0.copy()                # quick stop: the lag's input [unit] ...
-        self._brake_v = np.zeros(n)              # ... and its velocity [unit/s]
-        self._inputs = np.tile(x0, (self.sample_steps + 1, 1))   # the lag's input over the last tick [unit]
-        self._held = np.zeros(n, dtype=int)      # fine steps since the input last changed
-        self._brake_phase = np.zeros(n, dtype=int)   # fine steps since the quick stop's last step
-        self._tau = np.array([a.time_constant for a in self.axes])           # [s]
+        self._brake_x = x0.copy()                # quick stop: the lag's input [unit]
+        self._brake_y = x0.copy()                # ... its profile: start [unit],
+        self._brake_v = np.zeros(n)              # ... velocity there [unit/s],
+        self._brake_age = np.zeros(n, dtype=int) # ... fine steps since its start
+        self._brake_next = np.zeros(n, dtype=int)   # fine steps until the input's next step
+        self._input = x0.copy()                  # the lag's input in the last fine step [unit]
+        self._held = np.zeros(n, dtype=int)      # fine steps it has been held
 
     def reset_peak(self) -> None:
         """Forget the peak acceleration seen so far."""
@@ -105,28 +110,59 @@ class ServoModel:
 
     def brake(self) -> None:
         """Quick stop: ignore setpoints (also those inside the dead time);
-        the lag's input, from where it is and its velocity over the last
-        tick [unit/s], ramps to rest at the acceleration limit in steps of a
-        tick; the drive follows it through its lag and holds there (until
+        brake the drive from where it is, at its velocity over the last tick
+        [unit/s], at the acceleration limit to rest, and hold there (until
         release())."""
         new = ~self.braking
-        window = self.sample_steps * self.step                              # [s]
-        now = self._inputs[self._steps % self._inputs.shape[0]]
-        v = (now - self._inputs[(self._steps + 1) % self._inputs.shape[0]]) / window
-        # a drive far behind its input (at top speed) stops near where it is:
-        # the input leads it by no more than the lag lets it follow
-        lead = self.max_speed * self._tau                                   # [unit]
-        self._brake_x[new] = (self.position + np.clip(now - self.position, -lead, lead))[new]
-        self._brake_v[new] = np.clip(v, -self.max_speed, self.max_speed)[new]
-        self._brake_phase[new] = (np.minimum(self._held, self.sample_steps) - 1)[new]
+        T = self.sample_steps * self.step                                   # [s]
+        v = np.clip((self.position - self._back(self.sample_steps)) / T, -self.max_speed, self.max_speed)
+        # the input steps in the phase of the setpoints it replaces: a step
+        # in mid-tick would show in the drive's acceleration over a tick
+        self._brake_next[new] = (self.sample_steps - self._held % self.sample_steps)[new]
+        # the profile starts on the drive's motion as seen at those steps
+        # (its position at the last step, on at v), not on its wobble
+        # within the tick, which would show the same way
+        since = self.sample_steps - self._brake_next                        # [fine steps]
+        at_step = self._past[(self._steps - since) % self._past.shape[0], np.arange(len(self.axes))]
+        self._brake_y[new] = (at_step + v * since * self.step)[new]
+        self._brake_v[new] = v[new]
+        self._brake_age[new] = 0
         self.braking[:] = True
+        self._steer(new)
+
+    def _steer(self, due: np.ndarray) -> None:
+        """The next step of the quick stop's input for the drives due: the
+        input that, held until the step after, brings each onto its braking
+        profile, which ends at y + v|v| / (2 max_accel)."""
+        for j in np.flatnonzero(due):
+            n = int(self._brake_next[j])                                     # [fine steps]
+            y, v, a = self._brake_y[j], self._brake_v[j], self.max_accel[j]
+            t = min((self._brake_age[j] + n) * self.step, abs(v) / a)        # [s], braking ends
+            goal = min(max(y + v * t - np.sign(v) * a * t * t / 2, self.lower[j]), self.upper[j])
+            self._brake_x[j] = self._hold_input(j, goal, n)
+
+    def _hold_input(self, j: int, goal: float, n: int) -> float:
+        """The input [unit] that, held n fine steps, moves drive j from its
+        position to goal [unit]: the model's step inverted. Each step closes
+        alpha of the gap, at most vmax * step; a goal beyond n such steps
+        gets the input that runs the drive at top speed."""
+        y = self.position[j]
+        d, sign = abs(goal - y), (1.0 if goal >= y else -1.0)               # [unit]
+        top = self.max_speed[j] * self.step                                 # [unit] per step
+        keep = 1.0 - self._alpha[j]                                         # of an unclipped gap
+        clip = top / self._alpha[j]                                         # wider gaps move at top
+        for m in range(n):                  # m steps at top speed, then the lag's decay
+            gap = m * top + (d - m * top) / (1.0 - keep ** (n - m))
+            if gap - m * top <= clip:
+                return y + sign * gap
+        return y + sign * (clip + n * top)  # every step at top speed
 
     def release(self) -> None:
         """End a quick stop: hold the present position until new setpoints come."""
         self.braking[:] = False
         self.command = self.position.copy()
         self._line[:] = self.position
-        self._inputs[:] = self.position
+        self._input[:] = self.position
 
     def advance(self, seconds: float) -> None:
         """Integrate the model forward by seconds [s] (whole fine steps)."""
@@ -147,21 +183,11 @@ class ServoModel:
             self._line[self._head] = self.command
             delayed = self._line[(self._head - self.delay_steps) % depth, cols]
             if self.braking.any():
-                # the quick stop's input: a staircase, one step a tick in the
-                # phase of the setpoints it replaces, its velocity ramping to
-                # rest at max_accel (a command stream within the limits)
-                self._brake_phase += 1
-                due = self.braking & (self._brake_phase >= self.sample_steps)
-                if due.any():
-                    T = self.sample_steps * self.step                        # [s]
-                    bv = self._brake_v
-                    bv[due] -= (np.sign(bv) * np.minimum(np.abs(bv), self.max_accel * T))[due]
-                    self._brake_x[due] += bv[due] * T
-                    self._brake_phase[due] = 0
+                self._brake_age += 1
+                self._brake_next -= 1
                 delayed = np.where(self.braking, self._brake_x, delayed)
-            last = self._inputs[self._steps % self._inputs.shape[0]]
-            self._held = np.where(delayed == last, self._held + 1, 1)
-            self._inputs[(self._steps + 1) % self._inputs.shape[0]] = delayed
+            self._held = np.where(delayed == self._input, self._held + 1, 1)
+            self._input = delayed
             wanted = self._alpha * (delayed - self.position) / self.step     # [unit/s]
             wanted = np.clip(wanted, -self.max_speed, self.max_speed)
             dv = wanted - self.velocity
@@ -174,6 +200,10 @@ class ServoModel:
             out = ((self.position <= self.lower) & (self.velocity < 0)) | \
                   ((self.position >= self.upper) & (self.velocity > 0))
             self.velocity[out] = 0.0
+            if self.braking.any():
+                due = self.braking & (self._brake_next <= 0)
+                self._brake_next[due] = self.sample_steps
+                self._steer(due)
             self.command = np.where(self.braking, self._brake_x, self.command)
             self._steps += 1
             self._past[self._steps % self._past.shape[0]] = self.position
@@ -187,7 +217,7 @@ class ServoModel:
         """At a fixed point: not braking, at rest exactly where it is
         commanded, with every delayed and past value the same."""
         return (not self.braking.any() and np.array_equal(self.position, self.command)
-                and (self._line == self.command).all() and (self._inputs == self.command).all()
+                and (self._line == self.command).all() and (self._input == self.command).all()
                 and (self._past == self.position).all())
 
     def advance_to(self, t: float) -> None:

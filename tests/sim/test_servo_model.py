@@ -1,5 +1,7 @@
 """The simulated servos' behaviour model: exact where no limit acts, and the
 limits hold in random cases."""
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -136,3 +138,35 @@ def test_resting_drives_skip_their_steps_exactly(figure):
         assert fast._steps == slow._steps and fast.time == slow.time
         if k == 1:
             assert fast._resting()                  # at home and at rest: the skip is taken
+
+
+def test_quick_stop_from_steady_motion_brakes_at_the_limit_onto_its_stop_point():
+    """A drive cruising at a steady speed, braked at phases across the tick
+    of its setpoints, comes to rest where braking at its limit from its
+    motion ends (to 0.1 % of its range: the motion's wobble within a tick)
+    and decelerates at the limit over every tick (below the speed at which
+    its speed clips within a tick: tests/sim/test_stops.py)."""
+    axis = make_figure(1, time_constant=0.05, dead_time=0.03, max_speed=2.0, max_accel=12.0).axes[0]
+    axes = [axis, replace(axis, time_constant=0.12, dead_time=0.065)]      # steps in phase, and not
+    a = np.array([ax.max_accel for ax in axes])
+    span = axis.max - axis.min                                              # [unit]
+    for speed in (0.5, 1.0, 1.6):                                           # [unit/s]
+        for phase in range(0, 20, 3):                                       # [fine steps]
+            m = ServoModel(axes, T, start=[-0.9] * 2, clip_accel=False)
+            for k in range(25):                                             # at speed from tick 5
+                m.set_command(-0.9 + speed * T * np.maximum(0, k - 4) * np.ones(2))
+                m.advance(T)
+            m.reset_peak()
+            m.set_command(-0.9 + speed * T * 21 * np.ones(2))
+            m.advance(phase * m.step)
+            v = (m.position - m._back(m.sample_steps)) / T
+            stop = m.position + v * np.abs(v) / (2 * a)
+            m.brake()
+            xs = []
+            for _ in range(30):
+                m.advance(T)
+                xs.append(m.position.copy())
+            assert np.abs(xs[-1] - stop).max() <= 1e-3 * span, (speed, phase, xs[-1] - stop)
+            assert np.max(np.array(xs) - stop) <= 1e-3 * span, (speed, phase)
+            assert xs[-1] == pytest.approx(xs[-2], abs=1e-12)               # at rest
+            assert np.all(m.peak_accel <= a * 1.001), (speed, phase, m.peak_accel / a)

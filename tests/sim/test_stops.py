@@ -9,9 +9,9 @@ when the ramp's first command takes effect (the setpoints inside its dead
 time and lag played out): no axis may pass it by more than 1 % of its
 range, nor stop short of it by more, nor accelerate beyond its limit
 (docs/architecture.md, Stops).
-'estop': the same with an ESTOP to every node, whose own quick stop
-(ServoModel.brake) then moves the figure; no axis may pass the point where
-it comes to rest."""
+'quick stop': the nodes' own stop (ServoModel.brake), on an ESTOP or a
+watchdog trip, mid-motion: the same stop point, from where each drive is
+when the node brakes, and the same 1 % (SPEC.md 6, Quick stop)."""
 from dataclasses import replace
 
 import numpy as np
@@ -29,6 +29,12 @@ ACCEL_TOL = 1.02        # peak physical acceleration / limit allowed (rounding, 
 # 82 % of it for the winches) changes its in-tick shape as it slows, which
 # the measure between the ticks sees as up to 16 % more (at the ticks, the limit)
 STOP_ACCEL_TOL = 1.2
+# ... in a quick stop: the node steers its drive onto the braking profile at
+# the phase of its input's steps, where the measure gives the limit; the
+# input's velocity steps by about amax * tau at the start and the end, which
+# changes the drive's motion within each tick, so the measure at other phases
+# sees up to 12 % more below 70 % of the top speed, 18 % above
+QUICK_STOP_ACCEL_TOL = 1.2
 FAST = 0.7              # of the top speed
 SETTLE = 75             # ticks after the stop until the figure is judged at rest
 
@@ -60,21 +66,26 @@ def random_show(config, rng, ticks):
                 positions=out, loudness=np.zeros(ticks), tick_period=config.tick_period)
 
 
-def drive(config, engine, sim, ticks, on_tick):
+def drive(config, engine, sim, ticks, on_tick, on_step=lambda step: None, silent_from=None):
     """Runs the engine in step mode into sim (all on one virtual clock) for
-    ticks ticks, calling on_tick(k) before tick k. Returns the drives'
-    positions at every fine step from model time 0 [unit] (steps x axes)."""
+    ticks ticks, calling on_tick(k) before tick k and on_step(n) once the
+    drives are at fine step n; from tick silent_from on the host sends
+    nothing. Returns the drives' positions at every fine step from model
+    time 0 [unit] (steps x axes)."""
     T = config.tick_period
     model = next(iter(sim.nodes.values())).model
     per_tick = model.sample_steps
     fine = [sim.positions()]
     for k in range(ticks):
-        for i in range(1, per_tick + 1):                                # the drives up to tick k
-            sim.advance_to(((k - 1) * per_tick + i) * model.step if k else 0.0)
-            if k:
-                fine.append(sim.positions())
+        for i in range(1, per_tick + 1 if k else 1):                    # the drives up to tick k
+            step = (k - 1) * per_tick + i
+            sim.advance_to(step * model.step)
+            on_step(step)
+            fine.append(sim.positions())
         on_tick(k)
         engine.step(1)
+        if silent_from is not None and k >= silent_from:
+            continue
         cmd = engine.snapshot().commands.values()
         entries = [(a.node, a.channel, int(round(a.offset + a.scale * c))) for a, c in zip(config.axes, cmd)]
         sim.handle(protocol.Sync(k), k * T)
@@ -145,47 +156,71 @@ def test_stop_ramps_brake_the_drives_to_their_own_stop_point():
     assert np.all(accel[speed < FAST] <= ACCEL_TOL), accel[speed < FAST].max()
 
 
-def estop_run(config, show, stop_tick):
-    """Plays show into a SimFigure without acceleration clipping on a
-    virtual clock; at stop_tick the engine's stop and an ESTOP to every
-    node, which arrives with the tick's setpoints. Returns (positions per
-    tick after the stop, the figure's peak physical acceleration per axis)."""
+def quick_stop_case(config, rng, kind, trigger):
+    """One quick stop of the nodes themselves mid-motion (in a random dance
+    or in a move near top speed, as stop_case): an ESTOP to every node at a
+    random fine step within a tick ('estop'), or the host going silent with
+    a one-tick watchdog ('watchdog': it trips before the last setpoint's
+    hold reaches the drives, with setpoints still inside their dead time).
+    Its stop point is where the drive itself comes to rest braking at its
+    limit from where it is and its velocity over the tick before when the
+    node brakes. Returns per axis what stop_case returns."""
     T = config.tick_period
     sim = SimFigure(config, clip_accel=False)
     sim.advance_to(0.0)
-    x = []
-    with Engine(config, show) as engine:
-        for k in range(stop_tick + SETTLE):
-            if k == stop_tick:
-                engine.stop_motion()
-            engine.step(1)
-            cmd = engine.snapshot().commands.values()
-            entries = [(a.node, a.channel, int(round(a.offset + a.scale * c)))
-                       for a, c in zip(config.axes, cmd)]
-            sim.handle(protocol.Sync(k), k * T)
-            if k == stop_tick:
-                sim.handle(protocol.Estop(protocol.BROADCAST), k * T)
-            sim.handle(protocol.Setpoints(k, entries), k * T)
-            if k >= stop_tick:
-                x.append(sim.positions())
-    sim.advance_to((stop_tick + SETTLE) * T)
-    return np.array(x), sim.peak_accel()
-
-
-def test_estops_come_to_rest_within_one_percent_and_the_acceleration_limit():
-    """Over 100 random e-stops, fixed seed."""
-    config = figure()
-    span = np.array([a.max - a.min for a in config.axes])
-    limit = np.array([a.max_accel for a in config.axes])
-    rng = np.random.default_rng(18)
-    over, accel = [], []
-    for case in range(100):
+    node = next(iter(sim.nodes.values()))
+    per_tick, step = node.model.sample_steps, node.model.step                # [fine steps], [s]
+    if kind == "dance":
         show = random_show(config, rng, 160 + SETTLE)
-        x, peak = estop_run(config, show, int(rng.integers(60, 160)))
-        rest = x[-1]
-        direction = np.sign(rest - x[0])
-        over.append(np.max(direction * (x - rest), axis=0).clip(0) / span)
-        accel.append(peak / limit)
-    over, accel = np.array(over), np.array(accel)
-    assert over.max() <= OVERSHOOT, (np.median(over.max(axis=1)), over.max(axis=0))
-    assert np.all(accel <= ACCEL_TOL), (np.median(accel.max(axis=1)), accel.max(axis=0))
+        stop_tick = int(rng.integers(60, 160))
+        engine = Engine(config, show)
+        request = {}
+    else:
+        show = random_show(config, rng, 2)
+        stop_tick = int(rng.integers(12, 30))
+        engine = Engine(config, show, start_pose="home")
+        pose = {a.name: float(rng.choice([a.min, a.max]) * 0.9 + 0.1 * a.home) for a in config.axes}
+        request = {0: lambda: engine.move_to(pose)}
+    if trigger == "estop":
+        at = stop_tick * per_tick + int(rng.integers(0, per_tick))           # [fine steps]
+        on_step = lambda n: sim.handle(protocol.Estop(protocol.BROADCAST), n * step) if n == at else None
+        silent_from = None
+    else:
+        # the last setpoint at stop_tick - 1; then the watchdog shortened to a tick
+        at = stop_tick * per_tick
+        request[stop_tick] = lambda: sim.handle(protocol.Config(1, (), 1, round(T * 1e6), 0), stop_tick * T)
+        on_step = lambda n: None
+        silent_from = stop_tick
+    with engine:
+        fine = drive(config, engine, sim, stop_tick + SETTLE, lambda k: request.get(k, lambda: None)(),
+                     on_step, silent_from)
+    assert node.model.braking.all() and node.counters.watchdog_trips == (trigger == "watchdog")
+    y = fine[at]
+    v = (y - fine[at - per_tick]) / T
+    amax = np.array([a.max_accel for a in config.axes])
+    stop = np.clip(y + v * np.abs(v) / (2 * amax), [a.min for a in config.axes], [a.max for a in config.axes])
+    direction = np.where(v != 0, np.sign(v), 1.0)
+    over = np.max(direction * (fine[at:] - stop), axis=0).clip(0)
+    rest = np.abs(fine[-1] - stop)
+    span = np.array([a.max - a.min for a in config.axes])
+    vmax = np.array([a.max_speed for a in config.axes])
+    return over / span, rest / span, sim.peak_accel() / amax, np.abs(v) / vmax
+
+
+def test_quick_stops_brake_the_drives_to_their_own_stop_point():
+    """Over 100 random e-stops and 32 watchdog trips (16 axes each), fixed seed."""
+    config = figure()
+    rng = np.random.default_rng(18)
+    cases = [(kind, trigger) for trigger, n in (("estop", 50), ("watchdog", 16)) for kind in ("dance", "move")
+             for _ in range(n)]
+    results = [quick_stop_case(config, rng, kind, trigger) for kind, trigger in cases]
+    over, rest, accel, speed = (np.array(r) for r in zip(*results))
+    print(f"quick stops: {over.size} axis-stops, speed up to {speed.max():.2f} x the top speed "
+          f"(median {np.median(speed):.2f}); past the stop point: max {100 * over.max():.3f} % of the range "
+          f"(median of the cases' max {100 * np.median(over.max(axis=1)):.3f} %); "
+          f"rest off it: max {100 * rest.max():.3f} %; peak acceleration max {accel.max():.3f} x the limit "
+          f"(median {np.median(accel.max(axis=1)):.3f}; below {FAST} x the top speed {accel[speed < FAST].max():.3f})")
+    assert np.sum(speed > 0.8) >= 100                   # many stops at high speed
+    assert over.max() <= OVERSHOOT, (over.max(axis=0), np.unravel_index(over.argmax(), over.shape))
+    assert rest.max() <= OVERSHOOT, rest.max(axis=0)
+    assert np.all(accel <= QUICK_STOP_ACCEL_TOL), accel.max(axis=0)
