@@ -4,7 +4,12 @@
  * frame: loudness x (linear) -> level L = 20 log10(x) [dB] -> clamped at a
  * running peak level minus range_db (quieter detail, hum and noise do not
  * matter). The volume knob adds a constant to L, which the correlation
- * (Pearson: means and spreads removed per window) ignores.
+ * (Pearson: means and spreads removed per window) ignores. With band
+ * levels each band goes through the same map on its own, and the
+ * correlations run jointly over the bands (mar_follow_corr.h: each band's
+ * mean out per window, so a fixed colouring is ignored too) wherever the
+ * newest frame brought as many bands as the show has ("the main channel");
+ * the level logic (pause, onset, floor, gain) stays on the loudness.
  *
  * The line. A hypothesis "the live music is at stored position p now and
  * moves at rate r" maps the live frame of age i (0 = newest, covering live

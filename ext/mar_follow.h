@@ -1,7 +1,8 @@
 /* Music following: where in the taught music the live music is, every tick.
  *
  * At teach time the music's loudness was stored, one frame per tick (T =
- * 20 ms, marionette/music/feature.py). At the show the same music plays again,
+ * 20 ms, marionette/music/feature.py), and its level in a few bands
+ * (marionette/music/bands.py; mar_follow_create_music). At the show the same music plays again,
  * maybe faster or slower, wobbling, from anywhere, with pauses. Once per
  * tick the engine hands the newest live loudness frame to mar_follow_step,
  * which answers with the playback position p [stored ticks] and rate r
