@@ -107,14 +107,10 @@ def physical_stop(config, sim, fine, stop_tick):
     return at, v, stop
 
 
-def stop_case(config, rng, kind):
-    """One stop mid-motion: in a random dance ('dance') or in a move from
-    home to a far random pose ('move', stopped near top speed). Returns per
-    axis (how far past the stop point it went, |rest - stop point|, the
-    peak physical acceleration over the run / the limit, the speed [unit/s]
-    when the stop acted / the top speed)."""
-    sim = SimFigure(config, clip_accel=False)
-    sim.advance_to(0.0)
+def motion(config, rng, kind):
+    """The motion a stop interrupts: a random dance ('dance'), or a move from
+    home to a far random pose ('move', near top speed at the stop). Returns
+    (the engine, the tick to stop at, {tick: request to make before it})."""
     if kind == "dance":
         show = random_show(config, rng, 160 + SETTLE)
         stop_tick = int(rng.integers(60, 160))
@@ -126,6 +122,18 @@ def stop_case(config, rng, kind):
         engine = Engine(config, show, start_pose="home")
         pose = {a.name: float(rng.choice([a.min, a.max]) * 0.9 + 0.1 * a.home) for a in config.axes}
         request = {0: lambda: engine.move_to(pose)}
+    return engine, stop_tick, request
+
+
+def stop_case(config, rng, kind):
+    """One stop mid-motion: in a random dance ('dance') or in a move from
+    home to a far random pose ('move', stopped near top speed). Returns per
+    axis (how far past the stop point it went, |rest - stop point|, the
+    peak physical acceleration over the run / the limit, the speed [unit/s]
+    when the stop acted / the top speed)."""
+    sim = SimFigure(config, clip_accel=False)
+    sim.advance_to(0.0)
+    engine, stop_tick, request = motion(config, rng, kind)
     request[stop_tick] = engine.stop_motion
     with engine:
         fine = drive(config, engine, sim, stop_tick + SETTLE, lambda k: request.get(k, lambda: None)())
@@ -170,17 +178,7 @@ def quick_stop_case(config, rng, kind, trigger):
     sim.advance_to(0.0)
     node = next(iter(sim.nodes.values()))
     per_tick, step = node.model.sample_steps, node.model.step                # [fine steps], [s]
-    if kind == "dance":
-        show = random_show(config, rng, 160 + SETTLE)
-        stop_tick = int(rng.integers(60, 160))
-        engine = Engine(config, show)
-        request = {}
-    else:
-        show = random_show(config, rng, 2)
-        stop_tick = int(rng.integers(12, 30))
-        engine = Engine(config, show, start_pose="home")
-        pose = {a.name: float(rng.choice([a.min, a.max]) * 0.9 + 0.1 * a.home) for a in config.axes}
-        request = {0: lambda: engine.move_to(pose)}
+    engine, stop_tick, request = motion(config, rng, kind)
     if trigger == "estop":
         at = stop_tick * per_tick + int(rng.integers(0, per_tick))           # [fine steps]
         on_step = lambda n: sim.handle(protocol.Estop(protocol.BROADCAST), n * step) if n == at else None
