@@ -102,9 +102,28 @@ def physical_stop(config, sim, fine, stop_tick):
     cols = np.arange(len(config.axes))
     y = fine[at, cols]
     v = (y - fine[at - model.sample_steps, cols]) / config.tick_period
+    return at, v, braking_point(config, y, v)
+
+
+def braking_point(config, y, v):
+    """Per axis: where a drive at y [unit] moving at v [unit/s] comes to
+    rest braking at its limit, inside its position limits [unit]."""
     amax = np.array([a.max_accel for a in config.axes])
-    stop = np.clip(y + v * np.abs(v) / (2 * amax), [a.min for a in config.axes], [a.max for a in config.axes])
-    return at, v, stop
+    return np.clip(y + v * np.abs(v) / (2 * amax), [a.min for a in config.axes], [a.max for a in config.axes])
+
+
+def stop_figures(config, sim, after, v, stop):
+    """Per axis, from the fine positions from the stop on (after), the
+    velocity when it acted [unit/s] and its stop point [unit]: (how far past
+    the stop point it went, |rest - stop point|, both / the range; the peak
+    physical acceleration over the run / the limit; |v| / the top speed)."""
+    direction = np.where(v != 0, np.sign(v), 1.0)
+    over = np.max(direction * (after - stop), axis=0).clip(0)
+    rest = np.abs(after[-1] - stop)
+    span = np.array([a.max - a.min for a in config.axes])
+    limit = np.array([a.max_accel for a in config.axes])
+    vmax = np.array([a.max_speed for a in config.axes])
+    return over / span, rest / span, sim.peak_accel() / limit, np.abs(v) / vmax
 
 
 def motion(config, rng, kind):
@@ -126,11 +145,8 @@ def motion(config, rng, kind):
 
 
 def stop_case(config, rng, kind):
-    """One stop mid-motion: in a random dance ('dance') or in a move from
-    home to a far random pose ('move', stopped near top speed). Returns per
-    axis (how far past the stop point it went, |rest - stop point|, the
-    peak physical acceleration over the run / the limit, the speed [unit/s]
-    when the stop acted / the top speed)."""
+    """One engine stop mid-motion (motion(): a dance, or a move stopped near
+    top speed); its stop_figures."""
     sim = SimFigure(config, clip_accel=False)
     sim.advance_to(0.0)
     engine, stop_tick, request = motion(config, rng, kind)
@@ -138,14 +154,7 @@ def stop_case(config, rng, kind):
     with engine:
         fine = drive(config, engine, sim, stop_tick + SETTLE, lambda k: request.get(k, lambda: None)())
     at, v, stop = physical_stop(config, sim, fine, stop_tick)
-    after = fine[at.min():]
-    direction = np.where(v != 0, np.sign(v), 1.0)
-    over = np.max(direction * (after - stop), axis=0).clip(0)
-    rest = np.abs(after[-1] - stop)
-    span = np.array([a.max - a.min for a in config.axes])
-    limit = np.array([a.max_accel for a in config.axes])
-    vmax = np.array([a.max_speed for a in config.axes])
-    return over / span, rest / span, sim.peak_accel() / limit, np.abs(v) / vmax
+    return stop_figures(config, sim, fine[at.min():], v, stop)
 
 
 def test_stop_ramps_brake_the_drives_to_their_own_stop_point():
@@ -172,7 +181,7 @@ def quick_stop_case(config, rng, kind, trigger):
     hold reaches the drives, with setpoints still inside their dead time).
     Its stop point is where the drive itself comes to rest braking at its
     limit from where it is and its velocity over the tick before when the
-    node brakes. Returns per axis what stop_case returns."""
+    node brakes. Returns its stop_figures."""
     T = config.tick_period
     sim = SimFigure(config, clip_accel=False)
     sim.advance_to(0.0)
@@ -195,14 +204,7 @@ def quick_stop_case(config, rng, kind, trigger):
     assert node.model.braking.all() and node.counters.watchdog_trips == (trigger == "watchdog")
     y = fine[at]
     v = (y - fine[at - per_tick]) / T
-    amax = np.array([a.max_accel for a in config.axes])
-    stop = np.clip(y + v * np.abs(v) / (2 * amax), [a.min for a in config.axes], [a.max for a in config.axes])
-    direction = np.where(v != 0, np.sign(v), 1.0)
-    over = np.max(direction * (fine[at:] - stop), axis=0).clip(0)
-    rest = np.abs(fine[-1] - stop)
-    span = np.array([a.max - a.min for a in config.axes])
-    vmax = np.array([a.max_speed for a in config.axes])
-    return over / span, rest / span, sim.peak_accel() / amax, np.abs(v) / vmax
+    return stop_figures(config, sim, fine[at:], v, braking_point(config, y, v))
 
 
 def test_quick_stops_brake_the_drives_to_their_own_stop_point():
