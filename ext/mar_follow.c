@@ -607,7 +607,7 @@ mar_follow *mar_follow_create_music(const mar_follow_options *opt, const mar_fol
     tick_options tk;
     const char *problem;
     size_t n_stored = music ? music->n : 0, nb = music && music->bands ? music->n_bands : 0;
-    if (!opt || tick_options_of(opt, &tk, &problem) < 0 || !music->loudness || n_stored < 2
+    if (!opt || !music || tick_options_of(opt, &tk, &problem) < 0 || !music->loudness || n_stored < 2
         || n_stored > ((size_t)1 << 28) || (music->bands && (nb < 1 || nb > MAR_FOLLOW_MAX_BANDS))
         || !valid_values(music->loudness, n_stored) || (music->onset && !valid_values(music->onset, n_stored))
         || (music->bands && !valid_values(music->bands, n_stored * nb)))

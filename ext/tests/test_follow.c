@@ -3,6 +3,7 @@
  * tests/test_follow.py with -Wall -Wextra -Wpedantic -Werror under
  * AddressSanitizer and UBSan, and linked with --wrap=malloc (and calloc,
  * realloc, free) to prove that no step allocates. */
+#include <errno.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -75,6 +76,28 @@ static void test_bad_options(void)
         CHECK(!f && status < 0, "bad option %s accepted", bad[i].what);
         mar_follow_destroy(f);
     }
+    /* the music refused: none, too few or too many bands, a negative band level */
+    static double rows[100 * (MAR_FOLLOW_MAX_BANDS + 1)];
+    for (size_t i = 0; i < sizeof rows / sizeof rows[0]; i++)
+        rows[i] = 0.01 * (double)(i % 13);
+    status = 0;
+    CHECK(!mar_follow_create_music(&o, NULL, &status) && status == -EINVAL, "no music accepted");
+    const mar_follow_music bad_music[] = {
+        {.loudness = stored, .bands = rows, .n_bands = 0, .n = 100},
+        {.loudness = stored, .bands = rows, .n_bands = MAR_FOLLOW_MAX_BANDS + 1, .n = 100},
+        {.loudness = NULL, .n = 100},
+    };
+    for (size_t i = 0; i < sizeof bad_music / sizeof bad_music[0]; i++) {
+        status = 0;
+        CHECK(!mar_follow_create_music(&o, &bad_music[i], &status) && status == -EINVAL, "bad music %zu accepted", i);
+    }
+    const mar_follow_music six = {.loudness = stored, .bands = rows, .n_bands = 6, .n = 100};
+    f = mar_follow_create_music(&o, &six, &status);
+    CHECK(f && status == 0, "six bands refused: %d", status);
+    mar_follow_destroy(f);
+    rows[6 * 50 + 3] = -0.1;
+    CHECK(!mar_follow_create_music(&o, &six, &status) && status == -EINVAL, "a negative band level accepted");
+    rows[6 * 50 + 3] = 0.1;
     /* a fine rate grid is widened to MAX_RATES rates, not refused; other
      * tick periods convert the times */
     mar_follow_options fine = o;
