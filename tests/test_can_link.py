@@ -2,6 +2,7 @@
 in-process simulator answering on the same channel."""
 import threading
 import time
+from contextlib import contextmanager
 
 import can
 import numpy as np
@@ -40,13 +41,25 @@ class VirtualNodes(threading.Thread):
         self.bus.shutdown()
 
 
+@contextmanager
+def nodes_and_link(config, channel):
+    """The simulated figure answering on virtual CAN channel, and a CanLink
+    on it; both closed after."""
+    nodes = VirtualNodes(config, channel)
+    nodes.start()
+    link = open_link(f"can:virtual:{channel}")
+    try:
+        yield nodes, link
+    finally:
+        link.close()
+        nodes.stop.set()
+        nodes.join()
+
+
 def test_engine_over_a_virtual_can_bus_in_one_process():
     config = load_config(None)
     show = load_show(DEMO_SHOW, config)
-    nodes = VirtualNodes(config, "marionette-test")
-    nodes.start()
-    link = open_link("can:virtual:marionette-test")
-    try:
+    with nodes_and_link(config, "marionette-test") as (nodes, link):
         with Engine(config, show, output=link, record=True) as engine:
             for _ in range(40):
                 engine.step(1)
@@ -54,10 +67,6 @@ def test_engine_over_a_virtual_can_bus_in_one_process():
             time.sleep(0.2)
             records = engine.records()
             monitor = engine.nodes
-    finally:
-        link.close()
-        nodes.stop.set()
-        nodes.join()
     assert nodes.decoder.rejected == 0 and link.send_errors == 0
     trace = nodes.sim.trace_arrays()
     np.testing.assert_array_equal(trace["tick"], np.arange(40))
@@ -78,10 +87,7 @@ def test_a_bus_whose_sends_all_fail_is_gone_after_three_ticks():
     every node silent and stops the figure (the default silent_node)."""
     config = load_config(None)
     show = load_show(DEMO_SHOW, config)
-    nodes = VirtualNodes(config, "marionette-gone")
-    nodes.start()
-    link = open_link("can:virtual:marionette-gone")
-    try:
+    with nodes_and_link(config, "marionette-gone") as (nodes, link):
         with Engine(config, show, output=link, record=True) as engine:
             for _ in range(20):
                 engine.step(1)
@@ -90,10 +96,6 @@ def test_a_bus_whose_sends_all_fail_is_gone_after_three_ticks():
             for _ in range(10):
                 engine.step(1)
             records = engine.records()
-    finally:
-        link.close()
-        nodes.stop.set()
-        nodes.join()
     flags = records["flags"]
     lost = (flags & _core.FLAG_LINK_LOST) != 0
     first = int(np.argmax(lost))
