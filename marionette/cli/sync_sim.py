@@ -37,7 +37,7 @@ import numpy as np
 from marionette.cli.options import input_file, output_file
 from marionette.config import FOLLOW_MODES, load_config
 from marionette.errors import MarionetteError
-from marionette.music.bands import fit_frames, wav_bands
+from marionette.music.bands import wav_music_frames
 from marionette.music.feature import wav_frames, wav_loudness
 from marionette.music.follower import DEFAULT_START, STATES, Follower, cue_ticks, sync_ticks
 from marionette.show import load_show
@@ -102,8 +102,7 @@ def taught_frames(taught, period: float):
         if abs(show.tick_period - period) > 1e-12:
             raise SyncSimError(f"{taught}: tick period {show.tick_period} s, the figure's is {period} s")
         return show.loudness, show.onsets, show.bands
-    loud, onsets = wav_frames(taught, period)
-    return loud, onsets, fit_frames(wav_bands(taught, period), len(loud))
+    return wav_music_frames(taught, period)
 
 
 def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool = True,
@@ -116,10 +115,11 @@ def simulate(taught, live, mode: str = "smooth", config=None, live_onsets: bool 
     settings = config.follow if config is not None else None
     stored, stored_onsets, stored_bands = taught_frames(taught, period)
     live_bands = None
-    if live_onsets:
+    if live_onsets and stored_bands is not None:
+        frames, onsets, rows = wav_music_frames(live, period)
+        live_bands = sync_ticks(rows)
+    elif live_onsets:
         frames, onsets = wav_frames(live, period)
-        if stored_bands is not None:
-            live_bands = sync_ticks(fit_frames(wav_bands(live, period), len(frames)))
     else:                       # as a one-band node measures it: no onset, no bands
         frames = wav_loudness(live, period)
         onsets = np.full(len(frames), np.nan)

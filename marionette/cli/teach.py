@@ -22,8 +22,7 @@ from marionette.cli.options import ACCEL_FRACTION, CONFIG_HELP, Number, input_fi
 from marionette.config import load_config
 from marionette.engine import DEFAULT_LEAD, LEAD_MODES
 from marionette.errors import ArgumentError, TeachError
-from marionette.music.bands import wav_bands
-from marionette.music.feature import wav_frames
+from marionette.music.bands import wav_music_frames
 from marionette.music.report import TAUGHT_SHORT_SHARE, recording_warnings
 from marionette.progress import Progress
 from marionette.shape import POLICIES, last_departure, move_reach, shape_show
@@ -150,12 +149,11 @@ def _teach(args, progress: Progress) -> int:
     stage_values["shaped"] = show.positions
 
     progress.step("music")
-    loud, onset = wav_frames(args.music, period=config.tick_period)
+    loud, onset, band_rows = wav_music_frames(args.music, period=config.tick_period)
     n = show.n_ticks
     music_frames = loud.size
     show.loudness = np.concatenate([loud[:n], np.zeros(max(0, n - loud.size))])
     show.onsets = np.concatenate([onset[:n], np.zeros(max(0, n - onset.size))])
-    band_rows = wav_bands(args.music, period=config.tick_period)
     show.bands = np.concatenate([band_rows[:n], np.zeros((max(0, n - len(band_rows)), band_rows.shape[1]))])
 
     warnings = recording_warnings(args.music, loud, config.tick_period, show.duration, 0.0,

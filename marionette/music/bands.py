@@ -49,7 +49,7 @@ from __future__ import annotations
 import numpy as np
 
 from marionette.errors import ArgumentError
-from marionette.music.feature import BAND, FRAME_PERIOD, AudioError, LoudnessMeter, mono, read_wav
+from marionette.music.feature import BAND, FRAME_PERIOD, AudioError, LoudnessMeter, loudness, mono, onsets, read_wav
 
 N_BANDS = 6                 # bands between BAND[0] and BAND[1]: an octave apart [1]
 WINDOW_FRAMES = 4           # analysis window [frames]: 80 ms, bins 12.5 Hz apart
@@ -132,6 +132,18 @@ def wav_bands(path, period: float = FRAME_PERIOD, n_bands: int = N_BANDS) -> np.
     x, rate = read_wav(path)
     try:
         return bands(x, rate, period, n_bands)
+    except AudioError as exc:
+        raise AudioError(f"{path}: {exc}") from None
+
+
+def wav_music_frames(path, period: float = FRAME_PERIOD, n_bands: int = N_BANDS):
+    """Loudness [full scale], onset strength [dB] and band level rows [full
+    scale] of an audio file, one frame per period, the file read once; the
+    band rows fitted to the loudness's frames (fit_frames)."""
+    x, rate = read_wav(path)
+    try:
+        loud = loudness(x, rate, period)
+        return loud, onsets(x, rate, period), fit_frames(bands(x, rate, period, n_bands), len(loud))
     except AudioError as exc:
         raise AudioError(f"{path}: {exc}") from None
 

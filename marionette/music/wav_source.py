@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from marionette.music.bands import fit_frames, wav_bands
+from marionette.music.bands import wav_music_frames
 from marionette.music.feature import FRAME_PERIOD, wav_frames
 from marionette.music.follower import sync_ticks
 from marionette.music.source import LiveSource, Sink
@@ -35,10 +35,10 @@ class WavSource(LiveSource):
         super().__init__(sink, on_lost)
         self.path = path
         self.period = float(period)                             # [s]
-        self.loudness, self.onsets = wav_frames(path, period)   # [full scale], [dB]
-        self.bands = None
-        if bands:
-            self.bands = fit_frames(wav_bands(path, period), len(self.loudness))
+        if bands:           # [full scale], [dB], [full scale]
+            self.loudness, self.onsets, self.bands = wav_music_frames(path, period)
+        else:
+            (self.loudness, self.onsets), self.bands = wav_frames(path, period), None
         self._by_tick = (sync_ticks(self.loudness), sync_ticks(self.onsets),
                          None if self.bands is None else sync_ticks(self.bands))   # tick k: frame k - 1
         self._stop = threading.Event()
