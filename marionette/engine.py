@@ -25,7 +25,7 @@ import numpy as np
 from marionette import _core
 from marionette.config import FigureConfig
 from marionette.errors import ArgumentError, EngineError
-from marionette.music.follower import (DEFAULT_START, MAX_BANDS, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
+from marionette.music.follower import (DEFAULT_START, STATES as _FOLLOW_STATE_NAMES, cue_ticks,
                                        engine_options as follower_options, stored_bands)
 from marionette.music.node_source import NodeLoudness
 from marionette.recorder import FlightRecorder
@@ -158,8 +158,10 @@ class Engine:
         first = 0 if math.isnan(cue) else min(int(round(cue)), positions.shape[1] - 1)
         start = positions[:, first] if start_pose is None else self._pose(start_pose, fill=None)
         self.follow = follow
-        # band levels per frame the follower correlates (0: the loudness alone)
-        self.follow_bands = 0 if follow is None or self.show.bands is None else self.show.bands.shape[1]
+        # the stored band levels the follower correlates (None: the loudness alone)
+        bands = (None if follow is None or self.show.bands is None
+                 else stored_bands(self.show.bands, self.show.n_ticks, f"{self.show.path}: bands"))
+        self.follow_bands = 0 if bands is None else bands.shape[1]     # band levels per frame
         self._core = _core.CoreEngine(
             config.tick_period, LEAD_MODES[lead], INTERPOLATIONS[interpolation],
             axis_table(config, start), positions,
@@ -167,9 +169,7 @@ class Engine:
             RECORD_SLOTS if record else 0, LOUDNESS_SLOTS, start_pose is not None,
             None if follow is None else follower_options(config, self.show, follow),
             self.show.onsets if follow is not None else None, cue, ON_LOST[on_lost],
-            SILENT_NODE[config.faults.silent_node], config.faults.overruns,
-            None if follow is None or self.show.bands is None
-            else stored_bands(self.show.bands, self.show.n_ticks, f"{self.show.path}: bands"))
+            SILENT_NODE[config.faults.silent_node], config.faults.overruns, bands)
         self._request_lock = threading.Lock()
         self.recorder = None
         if record:
@@ -493,7 +493,7 @@ class Engine:
         if status == -errno.EINVAL:
             raise ArgumentError(f"live frame {value!r} (onset {onset!r}, bands {bands!r}) refused: the "
                                 "loudness must be finite and >= 0, the onset NaN or finite and >= 0, "
-                                f"at most {MAX_BANDS} bands, each finite and >= 0")
+                                "each band level finite and >= 0")
         _raise_for(status, "push_loudness")
 
     def _pose(self, pose, fill) -> np.ndarray:
