@@ -80,6 +80,7 @@ int mar_shape_plan(double x0, double x1, double t0, double T,
     p->smooth = 0.0;
     p->accel_end = accel;
     p->ramp_end = ramp;
+    p->turn = p->turn_end = 0.0;
     p->open = 0;
     p->reserved = 0;
     return 0;
@@ -196,24 +197,55 @@ int mar_shape_plan_lag(double x0, double x1, double t0, double T,
     p->smooth = w;
     p->accel_end = p->accel;
     p->ramp_end = p->ramp;
+    p->turn = p->turn_end = 0.0;
     p->open = 0;
     p->reserved = 0;
     return 0;
 }
 
-/* Closed-end accelerations mar_shape_plan_open tries: the open end's, the
- * limit and 10 halvings of it. */
+/* Closed-end accelerations mar_shape_plan_open tries: the open end's ramp's,
+ * the limit and 10 halvings of it. */
 #define CLOSED_TRIES 12
+/* Ramp accelerations it tries at an open end: from the turn's up to the
+ * limit, geometrically. */
+#define RAMP_TRIES 8
+
+/* One end of a core: a turn of acceleration g [unit/s^2] over r [s] (r = 0
+ * at a closed end), then a ramp of acceleration A from speed u = g*r. */
+typedef struct {
+    double g, r, A;
+} core_end;
+
+/* The cruise speed [unit/s] of a core of Tc [s] over dc [unit] with ends s
+ * and e, or INFINITY when none: each end at V spends r + (V - u)/A [s] and
+ * covers u*r/2 + (V^2 - u^2)/(2A), so dc = V*Tc - sum((V - u)^2/(2A) + V*r - u*r/2). */
+static double cruise_speed(double Tc, double dc, core_end s, core_end e)
+{
+    double us = s.g * s.r, ue = e.g * e.r;                  /* [unit/s] */
+    double h = 0.5 / s.A + 0.5 / e.A;                       /* [s^2/unit] */
+    double b = Tc - (s.r - us / s.A) - (e.r - ue / e.A);    /* [s] */
+    double c = dc + 0.5 * us * (us / s.A - s.r) + 0.5 * ue * (ue / e.A - e.r);  /* [unit] */
+    double disc = b * b - 4.0 * h * c;                      /* [s^2] */
+    if (!(b > 0.0) || !(c > 0.0) || disc < 0.0)
+        return INFINITY;
+    return 2.0 * c / (b + sqrt(disc));
+}
+
+/* Acceleration [unit/s^2] of try k of n from g up to a, geometrically. */
+static double ramp_try(double g, double a, int k, int n)
+{
+    return n > 1 && g < a ? g * pow(a / g, (double)k / (n - 1)) : g;
+}
 
 int mar_shape_plan_open(double x0, double x1, double t0, double T, double vmax, double amax,
-                        double lag, double w, int open, double a_start, double a_end,
+                        double lag, double w, int open, double g_start, double g_end,
                         mar_shape_profile *p)
 {
     if (p == NULL || !isfinite(x0) || !isfinite(x1) || !isfinite(t0) || !finite_positive(T) ||
         !finite_positive(vmax) || !finite_positive(amax) || !isfinite(lag) || lag < 0.0 ||
         !isfinite(w) || w < 0.0 || w >= T || (open & ~(MAR_SHAPE_OPEN_START | MAR_SHAPE_OPEN_END)) ||
-        ((open & MAR_SHAPE_OPEN_START) && !finite_positive(a_start)) ||
-        ((open & MAR_SHAPE_OPEN_END) && !finite_positive(a_end)))
+        ((open & MAR_SHAPE_OPEN_START) && !finite_positive(g_start)) ||
+        ((open & MAR_SHAPE_OPEN_END) && !finite_positive(g_end)))
         return -EINVAL;
     int os = (open & MAR_SHAPE_OPEN_START) != 0, oe = (open & MAR_SHAPE_OPEN_END) != 0;
     double v, a;                                /* the limits [unit/s], [unit/s^2] */
@@ -221,103 +253,95 @@ int mar_shape_plan_open(double x0, double x1, double t0, double T, double vmax, 
     double d = fabs(x1 - x0);                   /* [unit] */
     if (d == 0.0)
         return MAR_SHAPE_INFEASIBLE;            /* no turn at a move that stands still */
-    /* a closed end's acceleration: the open end's, the limit, then halves of
-     * it (a gentle closed end makes the cruise faster, so an open end's ramp
-     * longer), the first with which the move fits */
-    double as = os ? a_start : oe ? a_end : a, ae = oe ? a_end : as;
-    if (as > a * (1.0 + FIT_SLACK) || ae > a * (1.0 + FIT_SLACK))
+    if ((os && g_start > a * (1.0 + FIT_SLACK)) || (oe && g_end > a * (1.0 + FIT_SLACK)))
         return MAR_SHAPE_INFEASIBLE;
     double Tc = T - (os ? 0.0 : 0.5 * w) - (oe ? 0.0 : 0.5 * w);     /* the core [s] */
-    double dc = d + ((os ? as : 0.0) + (oe ? ae : 0.0)) * w * w / 24.0;  /* its distance [unit] */
-    double closed = a;                          /* the next closed-end try [unit/s^2] */
-    for (int tries = 0; tries < CLOSED_TRIES; ++tries) {
-        double h = 0.5 / as + 0.5 / ae;         /* ramps' time per speed, halved [s^2/unit] */
-        double disc = Tc * Tc - 4.0 * h * dc;   /* dc = V Tc - h V^2 [s^2] */
-        double V = disc >= 0.0 ? 2.0 * dc / (Tc + sqrt(disc)) : INFINITY;  /* [unit/s] */
-        double rs = V / as, re = V / ae;        /* [s] */
-        int ok = V <= v * (1.0 + FIT_SLACK) && Tc - rs - re >= w * (1.0 - FIT_SLACK) &&
-                 (!os || rs >= 0.5 * w * (1.0 - FIT_SLACK)) && (!oe || re >= 0.5 * w * (1.0 - FIT_SLACK));
-        if (ok) {
-            p->t0 = t0;
-            p->duration = T;
-            p->x0 = x0;
-            p->x1 = x1;
-            p->accel = as;
-            p->accel_end = ae;
-            p->peak_speed = V > v ? v : V;
-            p->ramp = rs;
-            p->ramp_end = re;
-            p->smooth = w;
-            p->open = open;
-            p->reserved = 0;
-            return 0;
-        }
-        if (os && oe)
-            break;
-        if (!os)
-            as = closed;
-        if (!oe)
-            ae = closed;
-        closed *= 0.5;
-    }
+    double dc = d + ((os ? g_start : 0.0) + (oe ? g_end : 0.0)) * w * w / 24.0;  /* [unit] */
+    /* without smoothing the turn is the ramp itself */
+    int ns = os ? (w > 0.0 ? RAMP_TRIES : 1) : 1, ne = oe ? (w > 0.0 ? RAMP_TRIES : 1) : 1;
+    int nc = os && oe ? 1 : CLOSED_TRIES;
+    for (int ks = 0; ks < ns; ++ks)
+        for (int ke = 0; ke < ne; ++ke)
+            for (int c = 0; c < nc; ++c) {
+                double as = ramp_try(g_start, a, ks, ns), ae = ramp_try(g_end, a, ke, ne);
+                /* a closed end: the open end's ramp's acceleration, the limit, then
+                 * halves of it (a gentle closed end makes the cruise faster, so the
+                 * open end's turn leaves below the cruise's speed) */
+                double closed = c > 0 ? a * ldexp(1.0, 1 - c) : os ? as : oe ? ae : a;
+                core_end s = os ? (core_end){g_start, 0.5 * w, as} : (core_end){0.0, 0.0, closed};
+                core_end e = oe ? (core_end){g_end, 0.5 * w, ae} : (core_end){0.0, 0.0, closed};
+                double V = cruise_speed(Tc, dc, s, e);              /* [unit/s] */
+                double us = s.g * s.r, ue = e.g * e.r;
+                double rs = V > us ? (V - us) / s.A : 0.0, re = V > ue ? (V - ue) / e.A : 0.0;
+                double lo = 1.0 - FIT_SLACK, hi = 1.0 + FIT_SLACK;
+                if (!(V <= v * hi) || !(V >= us * lo) || !(V >= ue * lo) ||
+                    !(Tc - s.r - rs - e.r - re >= w * lo))
+                    continue;
+                p->t0 = t0;
+                p->duration = T;
+                p->x0 = x0;
+                p->x1 = x1;
+                p->accel = s.A;
+                p->accel_end = e.A;
+                p->peak_speed = V > v ? v : V;
+                p->ramp = rs;
+                p->ramp_end = re;
+                p->turn = os ? g_start : 0.0;
+                p->turn_end = oe ? g_end : 0.0;
+                p->smooth = w;
+                p->open = open;
+                p->reserved = 0;
+                return 0;
+            }
     return MAR_SHAPE_INFEASIBLE;
 }
 
-/* The core in the move's direction, from its start: y(tau) [unit] at tau
- * [s] after the core starts, its velocity and acceleration; an open end goes
- * on as the parabola of its ramp beyond the core, a closed one stands. */
-static double core_y(const mar_shape_profile *p, double Tc, double dc, double tau,
-                     double *v, double *a)
+/* The core, in the move's direction, as pieces of constant acceleration:
+ * from time t [s] after the core starts, position y [unit], velocity v
+ * [unit/s], acceleration a [unit/s^2], and the integral of y from the first
+ * piece's start [unit*s] (for the moving average). */
+typedef struct {
+    double t, y, v, a, i;
+} core_piece;
+
+#define CORE_PIECES 7
+
+/* The pieces of a core of Tc [s] over dc [unit], from -w (the earliest a
+ * window reaches) on: before the core, an open start's parabola (else rest);
+ * the start's turn and ramp, the cruise, the end's ramp and turn; after the
+ * core, an open end's parabola (else rest), from exactly dc at rest. */
+static void core_pieces(const mar_shape_profile *p, double Tc, double dc, core_piece *q)
 {
-    double as = p->accel, ae = p->accel_end, rs = p->ramp, re = p->ramp_end, V = p->peak_speed;
-    double y, vel, ac;
-    if (tau < rs && (tau >= 0.0 || (p->open & MAR_SHAPE_OPEN_START))) {
-        y = 0.5 * as * tau * tau;
-        vel = as * tau;
-        ac = as;
-    } else if (tau < 0.0) {
-        y = vel = ac = 0.0;
-    } else if (tau <= Tc - re) {
-        y = 0.5 * as * rs * rs + V * (tau - rs);
-        vel = V;
-        ac = 0.0;
-    } else if (tau < Tc || (p->open & MAR_SHAPE_OPEN_END)) {
-        double r = Tc - tau;                    /* time to the core's end [s] */
-        y = dc - 0.5 * ae * r * r;
-        vel = ae * r;
-        ac = -ae;
-    } else {
-        y = dc;
-        vel = ac = 0.0;
+    int os = (p->open & MAR_SHAPE_OPEN_START) != 0, oe = (p->open & MAR_SHAPE_OPEN_END) != 0;
+    double w = p->smooth, rts = os ? 0.5 * w : 0.0, rte = oe ? 0.5 * w : 0.0;   /* [s] */
+    double gs = os ? p->turn : 0.0, ge = oe ? p->turn_end : 0.0;               /* [unit/s^2] */
+    double ts[CORE_PIECES] = {-w, 0.0, rts, rts + p->ramp, Tc - rte - p->ramp_end, Tc - rte, Tc};
+    double as[CORE_PIECES] = {gs, gs, p->accel, 0.0, -p->accel_end, -ge, -ge};
+    q[0] = (core_piece){-w, 0.5 * gs * w * w, -gs * w, gs, 0.0};
+    for (int k = 1; k < CORE_PIECES; ++k) {
+        const core_piece *b = &q[k - 1];
+        double h = ts[k] > b->t ? ts[k] - b->t : 0.0;       /* [s] */
+        q[k] = (core_piece){b->t + h, b->y + b->v * h + 0.5 * b->a * h * h, b->v + b->a * h,
+                            as[k], b->i + b->y * h + 0.5 * b->v * h * h + b->a * h * h * h / 6.0};
     }
-    if (v != NULL)
-        *v = vel;
-    if (a != NULL)
-        *a = ac;
-    return y;
+    q[CORE_PIECES - 1].y = dc;                  /* the end exact: no rounding drift */
+    q[CORE_PIECES - 1].v = 0.0;
 }
 
-/* Integral of core_y from the core's start to tau [s], [unit*s]: piecewise
- * cubic, for the moving average. */
-static double core_integral(const mar_shape_profile *p, double Tc, double dc, double tau)
+/* y of the core at tau [s] (its velocity, acceleration and integral out). */
+static double core_at(const core_piece *q, double tau, double *v, double *a, double *i)
 {
-    double as = p->accel, ae = p->accel_end, rs = p->ramp, re = p->ramp_end, V = p->peak_speed;
-    if (tau < 0.0)
-        return (p->open & MAR_SHAPE_OPEN_START) ? as * tau * tau * tau / 6.0 : 0.0;
-    if (tau <= rs)
-        return as * tau * tau * tau / 6.0;
-    double at_cruise = as * rs * rs * rs / 6.0;     /* over the first ramp */
-    double te = Tc - re;                            /* the last ramp starts [s] */
-    if (tau <= te) {
-        double c = tau - rs;
-        return at_cruise + 0.5 * as * rs * rs * c + 0.5 * V * c * c;
-    }
-    double c = te - rs;
-    double at_end = at_cruise + 0.5 * as * rs * rs * c + 0.5 * V * c * c;
-    double u = (p->open & MAR_SHAPE_OPEN_END) || tau < Tc ? tau : Tc;
-    double q = Tc - u;                              /* time to the core's end [s] */
-    double in_end = dc * (u - te) - ae * (re * re * re - q * q * q) / 6.0;
-    return at_end + in_end + (tau > u ? dc * (tau - u) : 0.0);
+    int k = 0;
+    while (k + 1 < CORE_PIECES && q[k + 1].t <= tau)
+        ++k;
+    double h = tau - q[k].t;                    /* [s], < 0 only before the first piece */
+    if (v != NULL)
+        *v = q[k].v + q[k].a * h;
+    if (a != NULL)
+        *a = q[k].a;
+    if (i != NULL)
+        *i = q[k].i + q[k].y * h + 0.5 * q[k].v * h * h + q[k].a * h * h * h / 6.0;
+    return q[k].y + q[k].v * h + 0.5 * q[k].a * h * h;
 }
 
 /* Position [unit] at tau [s] after departure; velocity and acceleration out:
@@ -329,28 +353,32 @@ static double eval_local(const mar_shape_profile *p, double tau, double *v, doub
     double q0 = os ? 0.0 : 0.5 * w;                 /* the core starts [s] */
     double Tc = p->duration - q0 - (oe ? 0.0 : 0.5 * w);
     double shift = w * w / 24.0;                    /* a parabola's, averaged over w [s^2] */
-    double c0 = p->x0 - (os ? s * p->accel * shift : 0.0);      /* the core's start [unit] */
-    double dc = fabs(p->x1 - p->x0) + ((os ? p->accel : 0.0) + (oe ? p->accel_end : 0.0)) * shift;
+    double c0 = p->x0 - (os ? s * p->turn * shift : 0.0);       /* the core's start [unit] */
+    double dc = fabs(p->x1 - p->x0) + ((os ? p->turn : 0.0) + (oe ? p->turn_end : 0.0)) * shift;
     double lo = p->x0 < p->x1 ? p->x0 : p->x1, hi = p->x0 < p->x1 ? p->x1 : p->x0;
     double x, vel = 0.0, ac = 0.0;
+    core_piece q[CORE_PIECES];
     if (tau <= 0.0) {
         x = p->x0;
     } else if (tau >= p->duration) {
         x = p->x1;                                  /* the end is hit bit for bit */
-    } else if (!(w > 0.0)) {
-        x = c0 + s * core_y(p, Tc, dc, tau, &vel, &ac);
     } else {
-        double t = tau - q0;                        /* the window's middle, core time [s] */
-        x = c0 + s * (core_integral(p, Tc, dc, t + 0.5 * w) - core_integral(p, Tc, dc, t - 0.5 * w)) / w;
-        double v1, v0;
-        double y1 = core_y(p, Tc, dc, t + 0.5 * w, &v1, NULL), y0 = core_y(p, Tc, dc, t - 0.5 * w, &v0, NULL);
-        vel = (y1 - y0) / w;
-        ac = (v1 - v0) / w;
+        core_pieces(p, Tc, dc, q);
+        if (!(w > 0.0)) {
+            x = c0 + s * core_at(q, tau, &vel, &ac, NULL);
+        } else {
+            double t = tau - q0;                    /* the window's middle, core time [s] */
+            double v1, v0, i1, i0;
+            double y1 = core_at(q, t + 0.5 * w, &v1, NULL, &i1), y0 = core_at(q, t - 0.5 * w, &v0, NULL, &i0);
+            x = c0 + s * (i1 - i0) / w;
+            vel = (y1 - y0) / w;
+            ac = (v1 - v0) / w;
+        }
     }
     if (tau == 0.0 && os) {                         /* a turn: at rest, accelerating */
-        ac = p->accel;
+        ac = p->turn;
     } else if (tau == p->duration && oe) {
-        ac = -p->accel_end;
+        ac = -p->turn_end;
     }
     x = x < lo ? lo : x > hi ? hi : x;              /* a monotone move: rounding never passes an end */
     if (v != NULL)
@@ -451,45 +479,89 @@ int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_
 /* Candidate accelerations a turn is tried with, from the larger of its two
  * moves' down to the smaller, geometrically. */
 #define TURN_TRIES 8
+/* Windows a move at a turn is tried with: its own, then 7/8, 6/8 ... 1/8 of it. */
+#define WINDOW_TRIES 8
+
+/* Move m planned again with the ends of open turning at g_start and g_end
+ * [unit/s^2] (mar_shape_plan_open), with the first of WINDOW_TRIES windows
+ * that fits: a turn lasts half the window, so a slow move (a long one has a
+ * wide window) may not be slow enough to turn in its own, and a narrow
+ * window limits the acceleration. */
+static int plan_turn(const mar_shape_options *opt, const mar_shape_profile *m, int open,
+                     double g_start, double g_end, mar_shape_profile *out)
+{
+    int tries = m->smooth > 0.0 ? WINDOW_TRIES : 1;
+    for (int k = 0; k < tries; ++k) {
+        double w = m->smooth * (double)(tries - k) / tries;     /* [s] */
+        if (mar_shape_plan_open(m->x0, m->x1, m->t0, m->duration, opt->max_speed, opt->max_accel,
+                                opt->lag, w, open, g_start, g_end, out) == 0)
+            return 0;
+    }
+    return MAR_SHAPE_INFEASIBLE;
+}
+
+/* Whether the figure turns without a rest where seg[i] arrives. */
+static int turns_at(const mar_shape_segment *seg, size_t count, size_t i)
+{
+    if (i + 1 >= count || seg[i].arrive_tick != seg[i + 1].depart_tick)
+        return 0;
+    return (seg[i].profile.x1 - seg[i].profile.x0) * (seg[i + 1].profile.x1 - seg[i + 1].profile.x0) < 0.0;
+}
+
+/* The accelerations [unit/s^2] a turn from move a into move b tries: from
+ * the larger of a's last ramp's and b's first down to the smaller, within
+ * both windows' limits. 0 when there is nothing to try. */
+static int turn_range(const mar_shape_options *opt, const mar_shape_profile *a,
+                      const mar_shape_profile *b, double *hi, double *lo)
+{
+    double va, aa, vb, ab;                      /* each window's limits */
+    mar_shape_lag_limits(a->smooth, opt->lag, opt->max_speed, opt->max_accel, &va, &aa);
+    mar_shape_lag_limits(b->smooth, opt->lag, opt->max_speed, opt->max_accel, &vb, &ab);
+    double cap = aa < ab ? aa : ab;
+    *hi = a->accel_end > b->accel ? a->accel_end : b->accel;
+    *lo = a->accel_end > b->accel ? b->accel : a->accel_end;
+    *hi = *hi < cap ? *hi : cap;
+    *lo = *lo < *hi ? *lo : *hi;
+    return *lo > 0.0;
+}
 
 /* Where the figure turns at a climax without a rest (the move before it
  * arrives when the next leaves, in the other direction), the two moves
  * share an acceleration there instead of each coming to rest with none:
  * the climax is the vertex of a parabola. From the first turn to the last,
- * the largest of TURN_TRIES accelerations (within both windows' limits)
- * with which both moves fit is taken, the move before keeping its start as
- * planned, the one after planned to rest at its end for now (the next turn
- * may open it); where none fits, both keep their ends at rest there. */
+ * the largest of TURN_TRIES accelerations (turn_range) with which both
+ * moves fit (plan_turn) is taken, the move before keeping its start's turn
+ * as planned, the one after planned to rest at its end for now. Where the
+ * one after turns again at its end, a first pass takes only an acceleration
+ * with which it could also turn there with the least that next turn tries
+ * (a steep turn at a slow move's start can leave it too slow to turn at its
+ * end). Where none fits, both keep their ends at rest there. */
 static void open_turns(const mar_shape_options *opt, mar_shape_segment *seg, size_t count)
 {
     for (size_t i = 1; i < count; ++i) {
         mar_shape_profile *a = &seg[i - 1].profile, *b = &seg[i].profile;
-        double da = a->x1 - a->x0, db = b->x1 - b->x0;      /* [unit] */
-        if (seg[i - 1].arrive_tick != seg[i].depart_tick || !(da * db < 0.0))
-            continue;                                       /* a rest there, or no turn */
-        double va, aa, vb, ab;                              /* each window's limits */
-        mar_shape_lag_limits(a->smooth, opt->lag, opt->max_speed, opt->max_accel, &va, &aa);
-        mar_shape_lag_limits(b->smooth, opt->lag, opt->max_speed, opt->max_accel, &vb, &ab);
-        double hi = a->accel_end > b->accel ? a->accel_end : b->accel;      /* [unit/s^2] */
-        double lo = a->accel_end > b->accel ? b->accel : a->accel_end;
-        double cap = aa < ab ? aa : ab;
-        hi = hi < cap ? hi : cap;
-        lo = lo < hi ? lo : hi;
-        if (!(lo > 0.0))
+        double hi, lo;                                      /* [unit/s^2] */
+        if (!turns_at(seg, count, i - 1) || !turn_range(opt, a, b, &hi, &lo))
             continue;
-        for (int c = 0; c < TURN_TRIES; ++c) {
-            double shared = hi * pow(lo / hi, (double)c / (TURN_TRIES - 1));
-            mar_shape_profile pa, pb;
-            if (mar_shape_plan_open(a->x0, a->x1, a->t0, a->duration, opt->max_speed, opt->max_accel,
-                                    opt->lag, a->smooth, (a->open & MAR_SHAPE_OPEN_START) | MAR_SHAPE_OPEN_END,
-                                    a->accel, shared, &pa) == 0 &&
-                mar_shape_plan_open(b->x0, b->x1, b->t0, b->duration, opt->max_speed, opt->max_accel,
-                                    opt->lag, b->smooth, MAR_SHAPE_OPEN_START, shared, 0.0, &pb) == 0) {
+        int ahead = turns_at(seg, count, i);                /* b turns at its end too */
+        for (int pass = ahead ? 0 : 1; pass < 2; ++pass)
+            for (int c = 0; c < TURN_TRIES; ++c) {
+                double shared = hi * pow(lo / hi, (double)c / (TURN_TRIES - 1));
+                double next_hi, next_lo;
+                mar_shape_profile pa, pb, pn;
+                if (plan_turn(opt, a, (a->open & MAR_SHAPE_OPEN_START) | MAR_SHAPE_OPEN_END, a->turn,
+                              shared, &pa) != 0 ||
+                    plan_turn(opt, b, MAR_SHAPE_OPEN_START, shared, 0.0, &pb) != 0)
+                    continue;
+                if (pass == 0 && (!turn_range(opt, &pb, &seg[i + 1].profile, &next_hi, &next_lo) ||
+                                  plan_turn(opt, &pb, MAR_SHAPE_OPEN_START | MAR_SHAPE_OPEN_END,
+                                            shared, next_lo, &pn) != 0))
+                    continue;
                 *a = pa;
                 *b = pb;
+                pass = 2;
                 break;
             }
-        }
     }
 }
 

@@ -47,11 +47,13 @@ typedef enum {
  * x + lag * x') has no step in velocity (docs/shaping.md).
  * A closed end (at rest) has acceleration 0: the core starts smooth/2 after
  * t0 (ends smooth/2 before the arrival), at rest. An open end
- * (MAR_SHAPE_OPEN_*) is a turn: there the move has velocity 0 but the
- * acceleration of its ramp, which the neighbouring move shares, so the
- * climax is the vertex of a parabola, not a flat top; the core reaches that
- * end (and goes on as the same parabola beyond it), starting (ending)
- * accel * smooth^2 / 24 beyond x0 (x1), the moving average's shift of a
+ * (MAR_SHAPE_OPEN_*) is a turn: there the move has velocity 0 and the
+ * acceleration turn (turn_end), which the neighbouring move shares, so the
+ * climax is the vertex of a parabola, not a flat top. The core reaches that
+ * end: its first (last) smooth/2 is that parabola, joined to the cruise by
+ * the ramp at accel (accel_end) >= turn (turn_end) from speed turn * smooth/2;
+ * beyond the end it goes on as the parabola. It starts (ends)
+ * turn * smooth^2 / 24 beyond x0 (x1), the moving average's shift of a
  * parabola, so that the move is at x0 (x1) there. */
 typedef struct {
     double t0;          /* departure [s], from the first tick of the show */
@@ -60,10 +62,12 @@ typedef struct {
     double x1;          /* end position [unit] */
     double accel;       /* magnitude of the core's first ramp's acceleration [unit/s^2] */
     double peak_speed;  /* magnitude of the core's cruise speed [unit/s] */
-    double ramp;        /* length of the core's first ramp [s] */
+    double ramp;        /* length of the core's first ramp [s] (an open start's turn not counted) */
     double smooth;      /* width of the moving average [s], 0 <= smooth < duration */
     double accel_end;   /* magnitude of the core's last ramp's deceleration [unit/s^2] */
-    double ramp_end;    /* length of the core's last ramp [s] */
+    double ramp_end;    /* length of the core's last ramp [s] (an open end's turn not counted) */
+    double turn;        /* magnitude of the acceleration at an open start [unit/s^2], <= accel; 0 closed */
+    double turn_end;    /* ... at an open end [unit/s^2], <= accel_end; 0 closed */
     int32_t open;       /* MAR_SHAPE_OPEN_* bits; 0: rest to rest */
     int32_t reserved;   /* 0 */
 } mar_shape_profile;
@@ -156,16 +160,18 @@ int mar_shape_plan_lag(double x0, double x1, double t0, double duration,
                        double max_speed, double max_accel, double lag, mar_shape_profile *p);
 
 /* The move of mar_shape_plan_lag with smoothing width smooth [s] and the
- * ends of open (MAR_SHAPE_OPEN_* bits): an open end's ramp has the
- * acceleration accel_start (accel_end) [unit/s^2], > 0; a closed one's the
- * first that fits of the open end's, the limit and halves of the limit. The ramps, the cruise and the
- * accelerations keep the limits of mar_shape_lag_limits(smooth); the cruise
- * lasts at least smooth and an open end's ramp at least smooth / 2 (so the
- * move is the parabola there). Returns 0 with *p set, MAR_SHAPE_INFEASIBLE
- * (*p untouched) when no such move fits, -EINVAL for bad arguments. */
+ * ends of open (MAR_SHAPE_OPEN_* bits): an open end turns with the
+ * acceleration turn_start (turn_end) [unit/s^2], > 0, over its core's first
+ * (last) smooth/2; its ramp's acceleration is the first that fits of a few
+ * from the turn's up to the limit (with smooth 0: the turn's). A closed end's
+ * is the first that fits of the open end's ramp's, the limit and halves of the
+ * limit. The ramps, the cruise and the accelerations keep the limits of
+ * mar_shape_lag_limits(smooth); the cruise lasts at least smooth. Returns 0
+ * with *p set, MAR_SHAPE_INFEASIBLE (*p untouched) when no such move fits,
+ * -EINVAL for bad arguments. */
 int mar_shape_plan_open(double x0, double x1, double t0, double duration,
                         double max_speed, double max_accel, double lag, double smooth,
-                        int open, double accel_start, double accel_end, mar_shape_profile *p);
+                        int open, double turn_start, double turn_end, mar_shape_profile *p);
 
 /* Position [unit], velocity [unit/s] and acceleration [unit/s^2] of a move
  * at time t [s] (x0 before t0, x1 after t0 + duration, velocity and
@@ -198,8 +204,9 @@ int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_
  * climax to the last, at every climax without a rest where the figure
  * turns, the two moves share an acceleration (mar_shape_plan_open): the
  * largest of a few, from the larger of theirs down to the smaller, with
- * which both fit; the climax is then sharp. Where none fits, it stays at
- * rest (flat). A move's end is kept
+ * which both fit, each move in its own window or a narrower one; the
+ * climax is then sharp. Where none fits, it stays at rest (flat). A move's
+ * end is kept
  * opt->pos_margin inside the position limits (reported as reduced). An infeasible move is handled by opt->policy and
  * always reported in its segment. out[0..n) receives the shaped trajectory
  * at every tick [unit]. Buffers: ext and seg of at least n entries each

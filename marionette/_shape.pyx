@@ -38,6 +38,8 @@ cdef extern from "mar_shape.h" nogil:
         double smooth
         double accel_end
         double ramp_end
+        double turn
+        double turn_end
         int32_t open
         int32_t reserved
     ctypedef struct mar_shape_extremum:
@@ -94,7 +96,7 @@ ACT_REJECTED = MAR_SHAPE_ACT_REJECTED
 
 # A move, as mar_shape_profile.
 PROFILE_FIELDS = ("t0", "duration", "x0", "x1", "accel", "peak_speed", "ramp", "smooth",
-                  "accel_end", "ramp_end", "open")
+                  "accel_end", "ramp_end", "turn", "turn_end", "open")
 EXTREMUM_DTYPE = np.dtype([
     ("tick", "i8"), ("rest_end", "i8"),     # climax and last tick of its rest [tick]
     ("value", "f8"),                        # taught position [unit]
@@ -112,6 +114,7 @@ SEGMENT_DTYPE = np.dtype([
     ("ramp", "f8"),                         # [s]
     ("smooth", "f8"),                       # moving-average window [s]
     ("accel_end", "f8"), ("ramp_end", "f8"),  # the core's last ramp [unit/s^2], [s]
+    ("turn", "f8"), ("turn_end", "f8"),     # acceleration at an open start, end [unit/s^2]
     ("open", "i4"),                         # OPEN_* bits: ends that turn without rest
 ])
 OPEN_START = MAR_SHAPE_OPEN_START
@@ -157,7 +160,8 @@ def plan(double x0, double x1, double t0, double duration, double max_speed, dou
 cdef dict _profile_dict(const mar_shape_profile *p):
     return {"t0": p.t0, "duration": p.duration, "x0": p.x0, "x1": p.x1,
             "accel": p.accel, "peak_speed": p.peak_speed, "ramp": p.ramp, "smooth": p.smooth,
-            "accel_end": p.accel_end, "ramp_end": p.ramp_end, "open": p.open}
+            "accel_end": p.accel_end, "ramp_end": p.ramp_end, "turn": p.turn,
+            "turn_end": p.turn_end, "open": p.open}
 
 
 
@@ -172,6 +176,8 @@ cdef int _profile_from(prof, mar_shape_profile *p) except -1:
     p.smooth = prof["smooth"]
     p.accel_end = prof["accel_end"]
     p.ramp_end = prof["ramp_end"]
+    p.turn = prof["turn"]
+    p.turn_end = prof["turn_end"]
     p.open = prof["open"]
     p.reserved = 0
     return 0
@@ -268,7 +274,7 @@ def shape_axis(x, double period, double max_speed, double max_accel, double pos_
                        s.reduced_by, s.action, s.profile.t0, s.profile.duration,
                        s.profile.x0, s.profile.x1, s.profile.accel, s.profile.peak_speed,
                        s.profile.ramp, s.profile.smooth, s.profile.accel_end,
-                       s.profile.ramp_end, s.profile.open)
+                       s.profile.ramp_end, s.profile.turn, s.profile.turn_end, s.profile.open)
         return r, out, extr, segs
     finally:
         free(ext)

@@ -14,9 +14,10 @@ def test_one_random_taught_show(capsys):
     targets = r["targets"]
     assert targets["limited == 0 on every shaped show"]
     assert targets["limited == 0 at other rates and following"]
-    # the servo's extremum: on time at the climaxes where the figure turns (most),
-    # up to 2 ticks off at the flat ones (a fast move next to a slow one)
+    # the servo's extremum: within a tick of every climax (each one a turn)
     assert r["climax_error_ticks_median_compensated"] < 0.05
+    assert r["climax_error_ticks_max_compensated"] <= 1.0
+    assert targets["climax_error_ticks_max_compensated <= 1"]
     assert r["alignment_error_ticks_max_compensated"] <= 1.0
 
 

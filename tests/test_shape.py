@@ -42,14 +42,20 @@ def check_profile(p, vmax, amax, n=257):
     assert np.all((x >= lo) & (x <= hi))
     # the parameters describe the distance covered: the core's, which lasts the
     # duration less half the window at each end at rest, and reaches beyond an
-    # open end by the moving average's shift of a parabola
+    # open end by the moving average's shift of a parabola; an open end turns
+    # over half the window, then ramps between the turn's speed and the cruise's
     d = abs(p["x1"] - p["x0"])
     opens, opene = int(p["open"]) & _shape.OPEN_START, int(p["open"]) & _shape.OPEN_END
-    w = p["smooth"]
+    w, V = p["smooth"], p["peak_speed"]
     core = p["duration"] - (0 if opens else w / 2) - (0 if opene else w / 2)
-    dc = d + (p["accel"] * bool(opens) + p["accel_end"] * bool(opene)) * w * w / 24
-    assert p["peak_speed"] * (core - 0.5 * p["ramp"] - 0.5 * p["ramp_end"]) == pytest.approx(
-        dc, rel=1e-9, abs=1e-15)
+    dc = d + (p["turn"] * bool(opens) + p["turn_end"] * bool(opene)) * w * w / 24
+    covered = V * core
+    for g, r, accel, ramp in ((p["turn"], w / 2 * bool(opens), p["accel"], p["ramp"]),
+                              (p["turn_end"], w / 2 * bool(opene), p["accel_end"], p["ramp_end"])):
+        u = g * r                                     # the turn's speed [unit/s]
+        assert g <= accel * (1 + REL) and ramp * accel == pytest.approx(V - u, rel=1e-9, abs=1e-12)
+        covered -= V * (r + ramp) - (0.5 * u * r + 0.5 * (u + V) * ramp)
+    assert covered == pytest.approx(dc, rel=1e-9, abs=1e-15)
     assert p["accel_end"] <= amax * (1 + REL)
     # velocity is the derivative of position
     dx = np.diff(x) / np.diff(t)

@@ -13,6 +13,7 @@ from marionette.engine import Engine
 from marionette.limiter_report import WARN_AXIS_TICKS, limited_axes, summary
 from marionette.shape import command_model, shape_show
 from conftest import run_cli
+from test_shape import check_profile
 
 SEED = 20261202
 REL = 1e-9
@@ -95,10 +96,15 @@ def test_turns_share_their_acceleration_and_keep_the_commands_limits():
             if a["open"] & _shape.OPEN_END:
                 assert b["open"] & _shape.OPEN_START
                 assert abs(va[0]) <= 2 * eps * abs(aa[0]) and abs(vb[0]) <= 2 * eps * abs(ab[0])
-                assert aa[0] == pytest.approx(ab[0], rel=1e-6) and aa[0] != 0
+                # one acceleration at the vertex; its rate of change (jerk) is bounded
+                assert a["turn_end"] == b["turn"] > 0
+                jerk = amax / min(a["smooth"], b["smooth"])     # [unit/s^3]
+                assert abs(aa[0] - ab[0]) <= 2 * eps * jerk and aa[0] != 0
                 assert np.sign(aa[0]) == -np.sign(a["x1"] - a["x0"])
                 assert xa[0] == pytest.approx(a["x1"], abs=eps ** 2 * abs(aa[0]) + 1e-12)
                 turns += 1
+                if turns % 10 == 0:
+                    check_profile(a, vmax, amax)
             else:
                 assert not b["open"] & _shape.OPEN_START
                 flat += 1
@@ -114,7 +120,7 @@ def test_turns_share_their_acceleration_and_keep_the_commands_limits():
         # a corner of the acceleration is a step of the jerk: np.gradient averages over it
         accel = np.gradient(speed, dt)[1:-1]
         assert np.all(np.abs(accel) <= amax * (1 + 1e-6)), (case, np.abs(accel).max() / amax)
-    assert turns > 5 * flat and turns > 1000, (turns, flat)
+    assert flat == 0 and turns > 1000, (turns, flat)
 
 
 def test_shaped_shows_leave_the_limiter_idle_at_every_rate_the_follower_allows():
@@ -147,6 +153,48 @@ def test_climaxes_land_within_a_tick_on_the_simulated_servos():
         assert r["limited_axis_ticks_compensated"] == 0
         assert r["climax_error_ticks_max_compensated"] <= climax.TARGET_TICKS, (seed, r)
         assert r["climax_error_ticks_median_uncompensated"] > 2.0
+
+
+def fast_slow_dance(config, rng, seconds):
+    """Per axis, climaxes that turn every time, joined by raised cosines that
+    are fast (0.4-0.8 s, often beyond the servo: reduced) and slow (2.5-5 s)
+    in turn: every climax lies between a fast move and a slow one."""
+    T = config.tick_period
+    t = np.arange(int(round(seconds / T))) * T                        # [s]
+    positions = np.empty((len(config.axes), t.size))
+    for j, a in enumerate(config.axes):
+        span, mid = a.max - a.min, 0.5 * (a.min + a.max)              # [unit]
+        times, values, up = [0.0, 0.5], [mid, mid], bool(rng.integers(2))
+        fast = bool(rng.integers(2))
+        while times[-1] < seconds:
+            times.append(times[-1] + (rng.uniform(0.4, 0.8) if fast else rng.uniform(2.5, 5.0)))
+            room = mid + 0.4 * span - values[-1] if up else values[-1] - (mid - 0.4 * span)
+            values.append(values[-1] + (1 if up else -1) * rng.uniform(0.1 * span, room))
+            up, fast = not up, not fast
+        k = np.searchsorted(times, t, side="right") - 1
+        t0, t1 = np.asarray(times)[k], np.asarray(times)[k + 1]
+        v0, v1 = np.asarray(values)[k], np.asarray(values)[k + 1]
+        positions[j] = v0 + (v1 - v0) * 0.5 * (1 - np.cos(np.pi * (t - t0) / (t1 - t0)))
+    return dataclasses.replace(climax.random_dance(config, seconds), positions=positions)
+
+
+def test_a_climax_between_a_fast_move_and_a_slow_one_turns_on_time():
+    """Random dances (fixed seed) whose every climax joins a fast move and a
+    slow one: each climax is a turn (a parabola's vertex, not a flat top) and
+    the simulated servo's extremum lies within a tick of it, the limiter idle.
+    (Planned to rest there, such a climax's extremum fell up to 2 ticks off.)"""
+    config = load_config()
+    rng = np.random.default_rng(SEED)
+    errors = []
+    for _ in range(3):
+        timing, report = climax.servo_timing(config, fast_slow_dance(config, rng, 16.0),
+                                             "dead_time_lag")
+        assert timing["limited"] == 0
+        assert np.all(timing["turning"]), np.count_nonzero(~timing["turning"])
+        errors.append(timing["extremum"])
+    errors = np.abs(np.concatenate(errors))
+    assert errors.size > 200 and not np.any(np.isnan(errors))
+    assert errors.max() <= climax.TARGET_TICKS, errors.max()
 
 
 def test_infeasible_moves_are_reported_with_axis_time_and_trade():

@@ -200,44 +200,56 @@ def _aligned_shifts(y: np.ndarray, x: np.ndarray, ticks: np.ndarray, substeps: i
     return out
 
 
+def servo_timing(config: FigureConfig, taught: Show, lead: str, substeps: int = SUBSTEPS):
+    """taught shaped for lead (policy reduce, rest tolerance 0), played through
+    the engine, each axis's commands into a simulated servo. Returns
+    (timing, shaping report): timing's "extremum" and "alignment" are the
+    climaxes' errors [ticks] (NaN: no extremum found), "turning" whether each
+    climax is a turn (the vertex of a parabola), "limited" the axis-ticks the
+    engine's limits acted on."""
+    T = config.tick_period
+    shaped, report = shape_show(taught, config, policy="reduce", rest_tolerance=0.0, lead=lead)
+    with Engine(config, shaped, lead=lead, record=True) as engine:
+        engine.step(shaped.n_ticks)
+        records = engine.records()
+    extremum, aligned, turning = [np.zeros(0)], [np.zeros(0)], [np.zeros(0, dtype=bool)]
+    for j, a in enumerate(config.axes):
+        moves = report.axes[j].moves
+        ticks, kinds = shaped_climaxes(report.axes[j].points, moves)
+        if not len(ticks):
+            continue
+        y = servo_fine(records["command"][:, j], T, max(0.0, a.dead_time - T / 2), a.time_constant,
+                       substeps)
+        x = shaped_fine(moves, shaped.n_ticks, T, substeps)
+        aligned.append(_aligned_shifts(y, x, ticks, substeps))
+        extremum.append(_climax_times(y, kinds, ticks, substeps) - ticks)
+        arriving = moves[np.searchsorted(moves["arrive_tick"], ticks)]
+        turning.append(arriving["open"] & _shape.OPEN_END > 0)
+    timing = {"extremum": np.concatenate(extremum), "alignment": np.concatenate(aligned),
+              "turning": np.concatenate(turning),
+              "limited": int(np.count_nonzero(records["excess"]))}
+    return timing, report
+
+
 def climax_timing(config: FigureConfig | None = None, seed: int = SEED,
                   seconds: float = SECONDS, substeps: int = SUBSTEPS) -> dict:
     """Climax timing errors [ticks] of the servos, with and without compensation."""
     config = config if config is not None else load_config()
-    T = config.tick_period
     taught = random_dance(config, seconds, seed)
     result: dict = {}
     for label, lead in (("compensated", "dead_time_lag"), ("uncompensated", "none")):
-        shaped, shaping = shape_show(taught, config, policy="reduce", rest_tolerance=0.0, lead=lead)
+        timing, shaping = servo_timing(config, taught, lead, substeps)
         if lead == "dead_time_lag":
-            report = shaping
-        with Engine(config, shaped, lead=lead, record=True) as engine:
-            engine.step(shaped.n_ticks)
-            records = engine.records()
-            commands = records["command"]
-        result[f"limited_axis_ticks_{label}"] = int(np.count_nonzero(records["excess"]))
-        aligned, extremum = [], []
-        for j, a in enumerate(config.axes):
-            moves = shaping.axes[j].moves
-            ticks, kinds = shaped_climaxes(shaping.axes[j].points, moves)
-            if not len(ticks):
-                continue
-            y = servo_fine(commands[:, j], T, max(0.0, a.dead_time - T / 2), a.time_constant,
-                           substeps)
-            x = shaped_fine(moves, shaped.n_ticks, T, substeps)
-            aligned.append(_aligned_shifts(y, x, ticks, substeps))
-            extremum.append(_climax_times(y, kinds, ticks, substeps) - ticks)
-        for key, errors in (("climax", extremum), ("alignment", aligned)):
-            err = np.abs(np.concatenate(errors))
-            missing = int(np.count_nonzero(np.isnan(err)))
-            err = err[~np.isnan(err)]
-            result[f"{key}_error_ticks_max_{label}"] = float(err.max())
-            result[f"{key}_error_ticks_median_{label}"] = float(np.median(err))
-            result[f"{key}_unmatched_{label}"] = missing
+            report, turning = shaping, timing["turning"]
+        result[f"limited_axis_ticks_{label}"] = timing["limited"]
+        for key in ("extremum", "alignment"):
+            err = np.abs(timing[key])
+            name = "climax" if key == "extremum" else key
+            result[f"{name}_error_ticks_max_{label}"] = float(np.nanmax(err))
+            result[f"{name}_error_ticks_median_{label}"] = float(np.nanmedian(err))
+            result[f"{name}_unmatched_{label}"] = int(np.count_nonzero(np.isnan(err)))
     result.update(
-        climaxes=int(sum(len(shaped_climaxes(a.points, a.moves)[0]) for a in report.axes)),
-        turning=int(sum(np.count_nonzero(np.isin(a.moves["arrive_tick"], shaped_climaxes(
-            a.points, a.moves)[0]) & (a.moves["open"] & _shape.OPEN_END > 0)) for a in report.axes)),
+        climaxes=len(turning), turning=int(np.count_nonzero(turning)),
         moves=report.segments, infeasible=len(report.infeasible), seconds=seconds, seed=seed,
         figure=config.name, target_ticks=TARGET_TICKS,
         target_met=bool(result["climax_error_ticks_max_compensated"] <= TARGET_TICKS))
