@@ -26,9 +26,9 @@
    parabola), less the climax tick: where the servo's motion turns, as the
    issue measures it. The shaper makes a climax where the figure turns the
    vertex of a parabola (the moves on either side share their acceleration
-   there), so that extremum is sharp; where two moves cannot share one (a
-   fast move next to a slow one) the climax stays flat, at rest with no
-   acceleration, and its extremum lies where micrometre errors put it.
+   there, docs/shaping.md "Turns"), so that extremum is sharp; a climax
+   where they share none would stay flat, at rest with no acceleration, its
+   extremum where micrometre errors put it (``turning`` counts the others).
    Beside it, ``alignment_*``: the shift, on the fine grid and refined by a
    parabola, that best aligns the servo's motion with the shaped
    trajectory's (evaluated exactly from its moves) over the ticks within
