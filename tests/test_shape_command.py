@@ -12,6 +12,7 @@ from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
 from marionette.limiter_report import WARN_AXIS_TICKS, limited_axes, summary
 from marionette.shape import command_model, shape_show
+from marionette.show import Show
 from conftest import run_cli
 from test_shape import check_profile
 
@@ -175,21 +176,24 @@ def fast_slow_dance(config, rng, seconds):
         t0, t1 = np.asarray(times)[k], np.asarray(times)[k + 1]
         v0, v1 = np.asarray(values)[k], np.asarray(values)[k + 1]
         positions[j] = v0 + (v1 - v0) * 0.5 * (1 - np.cos(np.pi * (t - t0) / (t1 - t0)))
-    return dataclasses.replace(climax.random_dance(config, seconds), positions=positions)
+    return Show(axis_names=config.axis_names, units=[a.unit for a in config.axes],
+                positions=positions, loudness=np.zeros(t.size), tick_period=T,
+                source="fast_slow_dance")
 
 
 def test_a_climax_between_a_fast_move_and_a_slow_one_turns_on_time():
     """Random dances (fixed seed) whose every climax joins a fast move and a
     slow one: each climax is a turn (a parabola's vertex, not a flat top) and
     the simulated servo's extremum lies within a tick of it, the limiter idle.
-    (Planned to rest there, such a climax's extremum fell up to 2 ticks off.)"""
+    (Planned to rest there, most such climaxes stayed flat, their extrema up to
+    4 ticks off.)"""
     config = load_config()
     rng = np.random.default_rng(SEED)
     errors = []
     for _ in range(3):
         timing, report = climax.servo_timing(config, fast_slow_dance(config, rng, 16.0),
                                              "dead_time_lag")
-        assert timing["limited"] == 0
+        assert timing["limited"] == 0 and report.limited == []     # at rate 1 and rate_max
         assert np.all(timing["turning"]), np.count_nonzero(~timing["turning"])
         errors.append(timing["extremum"])
     errors = np.abs(np.concatenate(errors))
