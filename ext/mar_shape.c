@@ -369,7 +369,8 @@ static double eval_local(const mar_shape_profile *p, double tau, double *v, doub
         } else {
             double t = tau - q0;                    /* the window's middle, core time [s] */
             double v1, v0, i1, i0;
-            double y1 = core_at(q, t + 0.5 * w, &v1, NULL, &i1), y0 = core_at(q, t - 0.5 * w, &v0, NULL, &i0);
+            double y1 = core_at(q, t + 0.5 * w, &v1, NULL, &i1);
+            double y0 = core_at(q, t - 0.5 * w, &v0, NULL, &i0);
             x = c0 + s * (i1 - i0) / w;
             vel = (y1 - y0) / w;
             ac = (v1 - v0) / w;
@@ -505,7 +506,8 @@ static int turns_at(const mar_shape_segment *seg, size_t count, size_t i)
 {
     if (i + 1 >= count || seg[i].arrive_tick != seg[i + 1].depart_tick)
         return 0;
-    return (seg[i].profile.x1 - seg[i].profile.x0) * (seg[i + 1].profile.x1 - seg[i + 1].profile.x0) < 0.0;
+    const mar_shape_profile *a = &seg[i].profile, *b = &seg[i + 1].profile;
+    return (a->x1 - a->x0) * (b->x1 - b->x0) < 0.0;
 }
 
 /* The accelerations [unit/s^2] a turn from move a into move b tries: from
@@ -525,44 +527,50 @@ static int turn_range(const mar_shape_options *opt, const mar_shape_profile *a,
     return *lo > 0.0;
 }
 
+/* The turn where seg[i - 1] arrives and seg[i] leaves: the largest of
+ * TURN_TRIES accelerations (turn_range) with which both moves fit
+ * (plan_turn), the move before keeping its start's turn as planned, the one
+ * after planned to rest at its end for now. With look_ahead, only an
+ * acceleration with which the one after could also turn at its end, with
+ * the least the turn there tries. Returns 1 when the moves were planned so. */
+static int share_turn(const mar_shape_options *opt, mar_shape_segment *seg, size_t i,
+                      int look_ahead)
+{
+    mar_shape_profile *a = &seg[i - 1].profile, *b = &seg[i].profile;
+    double hi, lo;                              /* [unit/s^2] */
+    if (!turn_range(opt, a, b, &hi, &lo))
+        return 0;
+    for (int c = 0; c < TURN_TRIES; ++c) {
+        double shared = hi * pow(lo / hi, (double)c / (TURN_TRIES - 1));     /* [unit/s^2] */
+        double next_hi, next_lo;
+        mar_shape_profile pa, pb, pn;
+        if (plan_turn(opt, a, (a->open & MAR_SHAPE_OPEN_START) | MAR_SHAPE_OPEN_END, a->turn,
+                      shared, &pa) != 0 ||
+            plan_turn(opt, b, MAR_SHAPE_OPEN_START, shared, 0.0, &pb) != 0)
+            continue;
+        if (look_ahead && (!turn_range(opt, &pb, &seg[i + 1].profile, &next_hi, &next_lo) ||
+                           plan_turn(opt, &pb, MAR_SHAPE_OPEN_START | MAR_SHAPE_OPEN_END, shared,
+                                     next_lo, &pn) != 0))
+            continue;
+        *a = pa;
+        *b = pb;
+        return 1;
+    }
+    return 0;
+}
+
 /* Where the figure turns at a climax without a rest (the move before it
  * arrives when the next leaves, in the other direction), the two moves
  * share an acceleration there instead of each coming to rest with none:
- * the climax is the vertex of a parabola. From the first turn to the last,
- * the largest of TURN_TRIES accelerations (turn_range) with which both
- * moves fit (plan_turn) is taken, the move before keeping its start's turn
- * as planned, the one after planned to rest at its end for now. Where the
- * one after turns again at its end, a first pass takes only an acceleration
- * with which it could also turn there with the least that next turn tries
- * (a steep turn at a slow move's start can leave it too slow to turn at its
- * end). Where none fits, both keep their ends at rest there. */
+ * the climax is the vertex of a parabola. From the first turn to the last
+ * (share_turn): where the move after turns again at its end, first looking
+ * ahead (a steep turn at a slow move's start can leave it too slow to turn
+ * at its end), then not. Where none fits, both keep their ends at rest. */
 static void open_turns(const mar_shape_options *opt, mar_shape_segment *seg, size_t count)
 {
-    for (size_t i = 1; i < count; ++i) {
-        mar_shape_profile *a = &seg[i - 1].profile, *b = &seg[i].profile;
-        double hi, lo;                                      /* [unit/s^2] */
-        if (!turns_at(seg, count, i - 1) || !turn_range(opt, a, b, &hi, &lo))
-            continue;
-        int ahead = turns_at(seg, count, i);                /* b turns at its end too */
-        for (int pass = ahead ? 0 : 1; pass < 2; ++pass)
-            for (int c = 0; c < TURN_TRIES; ++c) {
-                double shared = hi * pow(lo / hi, (double)c / (TURN_TRIES - 1));
-                double next_hi, next_lo;
-                mar_shape_profile pa, pb, pn;
-                if (plan_turn(opt, a, (a->open & MAR_SHAPE_OPEN_START) | MAR_SHAPE_OPEN_END, a->turn,
-                              shared, &pa) != 0 ||
-                    plan_turn(opt, b, MAR_SHAPE_OPEN_START, shared, 0.0, &pb) != 0)
-                    continue;
-                if (pass == 0 && (!turn_range(opt, &pb, &seg[i + 1].profile, &next_hi, &next_lo) ||
-                                  plan_turn(opt, &pb, MAR_SHAPE_OPEN_START | MAR_SHAPE_OPEN_END,
-                                            shared, next_lo, &pn) != 0))
-                    continue;
-                *a = pa;
-                *b = pb;
-                pass = 2;
-                break;
-            }
-    }
+    for (size_t i = 1; i < count; ++i)
+        if (turns_at(seg, count, i - 1) && !(turns_at(seg, count, i) && share_turn(opt, seg, i, 1)))
+            share_turn(opt, seg, i, 0);
 }
 
 int mar_shape_axis(const mar_shape_options *opt, const double *x, size_t n,

@@ -66,8 +66,9 @@ typedef struct {
     double smooth;      /* width of the moving average [s], 0 <= smooth < duration */
     double accel_end;   /* magnitude of the core's last ramp's deceleration [unit/s^2] */
     double ramp_end;    /* length of the core's last ramp [s] (an open end's turn not counted) */
-    double turn;        /* magnitude of the acceleration at an open start [unit/s^2], <= accel; 0 closed */
-    double turn_end;    /* ... at an open end [unit/s^2], <= accel_end; 0 closed */
+    double turn;        /* magnitude of the acceleration at an open start [unit/s^2],
+                           <= accel; 0 when closed */
+    double turn_end;    /* ... at an open end [unit/s^2], <= accel_end; 0 when closed */
     int32_t open;       /* MAR_SHAPE_OPEN_* bits; 0: rest to rest */
     int32_t reserved;   /* 0 */
 } mar_shape_profile;
@@ -206,9 +207,9 @@ int mar_shape_extrema(const double *x, size_t n, double prominence, double rest_
  * largest of a few, from the larger of theirs down to the smaller, with
  * which both fit, each move in its own window or a narrower one; the
  * climax is then sharp. Where none fits, it stays at rest (flat). A move's
- * end is kept
- * opt->pos_margin inside the position limits (reported as reduced). An infeasible move is handled by opt->policy and
- * always reported in its segment. out[0..n) receives the shaped trajectory
+ * end is kept opt->pos_margin inside the position limits (reported as
+ * reduced). An infeasible move is handled by opt->policy and always
+ * reported in its segment. out[0..n) receives the shaped trajectory
  * at every tick [unit]. Buffers: ext and seg of at least n entries each
  * (n - 1 segments at most). Returns the number of infeasible segments
  * (>= 0; under MAR_SHAPE_REJECT the output is planned as under REDUCE and
