@@ -7,8 +7,9 @@ dance or in a move at top speed. Its stop point is where the drive itself
 comes to rest braking at its acceleration limit from its physical state
 when the ramp's first command takes effect (the setpoints inside its dead
 time and lag played out): no axis may pass it by more than 1 % of its
-range, nor stop short of it by more, nor accelerate beyond its limit
-(docs/architecture.md, Stops).
+range, nor stop short of it by more, nor accelerate beyond its limit at
+any instant by more than sending whole counts can add (rounding_accel;
+docs/architecture.md, Stops).
 'quick stop': the nodes' own stop (ServoModel.brake), on an ESTOP or a
 watchdog trip, mid-motion: the same stop point, from where each drive is
 when the node brakes, and the same 1 % (SPEC.md 6, Quick stop)."""
