@@ -328,7 +328,7 @@ static void predict_motion(mar_engine *e, int64_t elapsed_periods)
  * pose at blend_position [show ticks] (BLEND) from its present command and
  * velocity, sync: all arrive together; or to rest (STOP): the servo's
  * predicted motion brakes at the acceleration limit, and the commands
- * (move_target) invert the lag to make it do so. */
+ * (stop_target) invert the lag to make it do so. */
 static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
 {
     double longest = 0.0;
@@ -336,6 +336,11 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
         const mar_limits *l = &e->axes[j].limits;
         int stop = kind == MAR_REQ_STOP;
         double x0 = stop ? e->drive[j].y : e->cmd[j], v0 = stop ? e->drive[j].v : e->vel[j];
+        /* a lag's drive brakes 3/4 amax*T in each of the first two ticks, not
+         * 1/2 then 1: at top speed, where its motion within a tick changes
+         * shape as it slows, that is what its limit allows (Stops) */
+        if (stop && v0 != 0.0 && e->drive[j].tau > 0.0)
+            x0 -= (v0 > 0.0 ? 0.25 : -0.25) * l->max_accel * e->opt.period * e->opt.period;
         double target = kind == MAR_REQ_BLEND ? show_target(e, j, blend_position, e->rate)
                       : kind == MAR_REQ_GOTO ? e->request_copy[j] : NAN;
         if (!isfinite(target))                          /* stop where braking ends */
@@ -357,33 +362,30 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
     e->mode = MAR_MODE_MOVE;
     e->move_kind = kind;
     e->move_time = 0.0;
-    /* a stop's commands lead its profile by a tick (move_target): they
+    /* a stop's commands lead its profile by a tick (stop_target): they
      * reach rest one tick after it, and their velocity 0 one tick later */
     e->move_duration = kind == MAR_REQ_STOP ? longest + 2.0 * e->opt.period : longest;
 }
 
-/* Axis j's target in mode MOVE at move_time t [s]: the profile, or for a
- * stop the command that moves the drive from where it will be (the profile
- * at t - T, where its first command finds it) to the profile at t. */
+/* Axis j's target in mode MOVE at move_time t [s]: the profile. */
 static double move_target(const mar_engine *e, size_t j, double t)
 {
-    double v, x = mar_move_eval(&e->moves[j], t, &v);
-    const mar_lag *d = &e->drive[j];
-    if (e->move_kind != MAR_REQ_STOP || d->tau <= 0.0)
-        return x;
-    mar_lag from = *d;
-    from.y = mar_move_eval(&e->moves[j], t - e->opt.period, &v);
-    return mar_lag_input(&from, x - from.y);
+    double v;
+    return mar_move_eval(&e->moves[j], t, &v);
 }
 
-/* For a stop: the command velocities [unit/s] that change the drive's
- * predicted velocity by at most max_accel * T (accel[0], accel[1]). */
-static void drive_accel_window(const mar_engine *e, size_t j, double accel[2])
+/* Axis j's command in a stop: the input that moves the drive from where it
+ * will be to the profile at move_time t [s], if its acceleration allows
+ * (mar_lag_stop_input), with the command velocities [unit/s] that keep it
+ * within the limit (accel). Sets *limited when the profile is left. */
+static double stop_target(const mar_engine *e, size_t j, double t, double accel[2], int *limited)
 {
-    const mar_lag *d = &e->drive[j];
-    double T = e->opt.period, aT = e->axes[j].limits.max_accel * T;   /* [unit/s] */
-    accel[0] = (mar_lag_input(d, (d->v - aT) * T) - e->cmd[j]) / T;
-    accel[1] = (mar_lag_input(d, (d->v + aT) * T) - e->cmd[j]) / T;
+    double v, T = e->opt.period, window[2], input;                   /* [unit] */
+    double goal = mar_move_eval(&e->moves[j], t, &v), after = mar_move_eval(&e->moves[j], t + T, &v);
+    *limited = mar_lag_stop_input(&e->drive[j], e->axes[j].limits.max_accel, goal, after, window, &input);
+    accel[0] = (window[0] - e->cmd[j]) / T;
+    accel[1] = (window[1] - e->cmd[j]) / T;
+    return input;
 }
 
 /* The fault reactions, after the operator's request of this tick (a fault
@@ -500,21 +502,20 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     uint32_t limited = 0;
     int stopping = e->mode == MAR_MODE_MOVE && e->move_kind == MAR_REQ_STOP;
     for (size_t j = 0; j < e->n_axes; j++) {
-        double target;
-        if (e->mode == MAR_MODE_SHOW)
+        double target, accel[2];
+        int left = 0, hit;
+        if (stopping)
+            target = stop_target(e, j, e->move_time, accel, &left);
+        else if (e->mode == MAR_MODE_SHOW)
             target = show_target(e, j, p, r);
         else if (e->mode == MAR_MODE_MOVE)
             target = move_target(e, j, e->move_time);
         else
             target = e->cmd[j];
-        int hit;
-        double accel[2];
-        if (stopping)
-            drive_accel_window(e, j, accel);
         e->cmd[j] = mar_limit_step(&e->axes[j].limits, T, e->cmd[j], e->vel[j], target,
                                    stopping ? accel : NULL, &e->vel[j], &hit);
         e->excess[j] = hit ? target - e->cmd[j] : 0.0;
-        limited += (uint32_t)hit;
+        limited += (uint32_t)(hit || left);
     }
     if (limited)
         flags |= MAR_FLAG_LIMITED;
