@@ -488,7 +488,7 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
      * smoothly while it plays on; moves, holds and seeks set it. The
      * paper's mode doubles and skips samples as the paper did */
     double p = e->position, r = e->rate;
-    if (e->follow && e->opt.follow_opt.mode == MAR_FOLLOW_SMOOTH) {
+    if (e->follow && e->opt.follow_opt.mode != MAR_FOLLOW_PAPER) {
         if (e->mode == MAR_MODE_SHOW && e->was_playing && !seek)
             mar_clock_follow(&e->clock, p, r, T, e->opt.follow_opt.rate_max - 1.0);
         else

@@ -85,6 +85,7 @@
  * clamp lagging behind the knob, not a wrong place. */
 #include "mar_follow.h"
 #include "mar_follow_corr.h"
+#include "mar_follow_deck.h"
 #include "mar_follow_kf.h"
 
 #include <errno.h>
@@ -177,6 +178,17 @@ static const double CUE_FIT_AT_S[CUE_FITS] = {      /* ... this much music [s]: 
 #define CUE_RATE_SPAN 0.07      /* rates 1 +- this [stored ticks per tick] ... */
 #define CUE_RATE_STEP 0.005     /* ... in these steps */
 #define CUE_LAGS 5              /* offsets from the line through the cue, either way [ticks] */
+#define MODEL_HISS_SIGMA 1.0     /* model: a stop's hiss wobbles at least this much, 1 sigma [dB] */
+#define MODEL_MUSIC_SPAN 60.0    /* model: music after a stop lies up to this far over its hiss [dB] */
+#define MODEL_IDLE 8             /* model: the search's pace, 1/this, while the place is clear [1] */
+#define MODEL_USUAL_S 10.0       /* model: how well the music fits its place, averaged over this long [s] */
+#define MODEL_CUE_DOUBT 0.01     /* model: P(a cue, or a place just taken over, is wrong), a priori [1] */
+#define MODEL_ASTRAY_VAR_P 4.0   /* model: the position's variance when the tracker went astray [tick^2] */
+#define MODEL_ASTRAY_VAR_R 1e-4  /* ... and the rate's [1] */
+#define MODEL_ELSE_Z 0.3         /* model: somewhere else fits this much under the usual fit here, in Fisher z: music fits
+                                  * some passages less well than others, a jump worse still [1] */
+#define MODEL_LOCK_RATE_VAR 9e-4 /* model: the rate's variance when a candidate is taken: a lock on a short
+                                  * window knows the rate to a few % [1] */
 #define CUE_LOCK 0.8            /* a fit this good, and sharp, locks the cue [1] ... */
 #define CUE_PRIOR 0.5           /* ... if it leads every other place by this times a search lock's lead [1] */
 
@@ -199,6 +211,8 @@ typedef struct {
     uint64_t since;             /* first step whose frame is consistent with it */
     uint64_t checked;           /* step of its last verification */
     uint64_t sweep;             /* sweep that last scored it */
+    double rho;                 /* model: its score on the followed place's window [1], NAN: none */
+    double belief;              /* model: its log weight against the followed place's [1], NAN: none yet */
 } cand;
 
 /* A feature the correlations run on: `bands` values per frame (one for
@@ -232,6 +246,11 @@ typedef struct {
     size_t cue_fit_at[CUE_FITS];  /* [ticks] */
     double level_release, gain_step;    /* [dB per tick] */
     double gain_alpha, gain_slow_alpha, pause_alpha, h_fast, h_slow;   /* smoothing per tick [1] */
+    /* the model's */
+    double stop_hazard, start_hazard;  /* P(the deck stops, starts) per tick [1] */
+    double log_share;           /* log P(the tape jumps to a given place) per tick [1] */
+    double evidence_per_frame;  /* independent values per frame and band [1] */
+    double usual;               /* MODEL_USUAL_S [ticks] */
 } tick_options;
 
 struct mar_follow {
@@ -349,6 +368,17 @@ struct mar_follow {
     int64_t ticks_since_frame;  /* ticks since the last frame [ticks] */
     int64_t unstepped;          /* ticks since the last step [ticks] */
 
+    /* the tape deck model (mode MAR_FOLLOW_MODEL, mar_follow_deck.h) */
+    mar_deck_motion motion;
+    uint64_t stop_run;          /* first step of the newest run of frames that favour a stop */
+    uint64_t play_run;          /* ... that favour playing */
+    double lead_rho;            /* the followed place's score on its window [1], NAN: none */
+    double lead_belief, else_belief;    /* log weights of the followed place and of somewhere else [1] */
+    uint64_t belief_t;          /* the step the place belief was last updated */
+    int proven;                 /* the followed place has met a whole sweep's candidates (a cue has not) */
+    double rho_usual;           /* how well the followed place has fitted, over the last MODEL_USUAL_S [1], NAN: not yet */
+    int rescore;                /* the pool entry rescored next */
+
     mar_follow_counters c;
 };
 
@@ -439,6 +469,11 @@ static int tick_options_of(const mar_follow_options *o, tick_options *tk, const 
     tk->pause_alpha = per_tick(PAUSE_ALPHA, T);
     tk->h_fast = per_tick(H_FAST, T);
     tk->h_slow = per_tick(H_SLOW, T);
+    tk->stop_hazard = T / o->stop_every;
+    tk->start_hazard = fmin(1.0, T / o->stop_for);
+    tk->log_share = log(fmin(1.0, T / o->jump_every));
+    tk->evidence_per_frame = o->evidence_rate * T;
+    tk->usual = MODEL_USUAL_S / T;
     /* at most MAX_RATES rates, whatever the rate range */
     tk->rate_step = fmax(o->rate_step, (o->rate_max - o->rate_min) / (MAX_RATES - 1) * 1.000001);
     if (tk->min_window < 4 || tk->paper_window < 4)
@@ -742,6 +777,14 @@ void mar_follow_reset(mar_follow *f, double position)
     f->doubt = f->probation = f->near = f->regaining = f->unproven = 0;
     f->gap_run = 0;
     f->h_slow = f->h_fast = 0.0;
+    mar_deck_motion_init(&f->motion, 0.0, f->tk.stop_hazard, f->tk.start_hazard);
+    f->stop_run = f->play_run = f->t + 1;
+    f->lead_rho = NAN;
+    f->lead_belief = 0.0;
+    f->else_belief = f->tk.log_share;
+    f->belief_t = f->t;
+    f->proven = isfinite(position);             /* a known start (a seek) is given */
+    f->rho_usual = NAN;
     stop_search(f);
     if (isfinite(position)) {
         double last = (double)f->n;
@@ -968,6 +1011,7 @@ static void offer(mar_follow *f, double p, double r, double score)
     slot->r = r;
     slot->coarse = score;
     slot->fine = NAN;
+    slot->rho = slot->belief = NAN;
     slot->sweep = f->sweep_id;
     slot->since = f->t + 1 > span ? f->t + 1 - span : 0;
     if (slot->since < f->search_from)
@@ -1007,9 +1051,8 @@ static void peak_at_prev(mar_follow *f)
 
 /* Score the next search_budget (offset, rate) pairs of the sweep. Per
  * offset the best rate counts; only local maxima over offsets are offered. */
-static void sweep(mar_follow *f)
+static void sweep(mar_follow *f, size_t budget)
 {
-    size_t budget = f->opt.search_budget;
     while (budget > 0) {
         if (f->sweep_o > f->nc) {                     /* a sweep is complete */
             if (f->prev_score >= SEARCH_MIN_SCORE && f->prev_score > f->prev2_score)
@@ -1323,7 +1366,7 @@ static void take_frame(mar_follow *f, const mar_follow_frame *fr, uint32_t *flag
     /* a frame without its onset (a source that has none) leaves a gap in the
      * onset feature; a window without onsets tracks on the loudness alone */
     f->onset.ring[slot] = f->level.ring[slot] + (f->onsets ? f->opt.onset_weight * fr->onset : 0.0);
-    int bands = f->band.bands && fr->n_bands == f->band.bands && f->opt.mode == MAR_FOLLOW_SMOOTH;
+    int bands = f->band.bands && fr->n_bands == f->band.bands && f->opt.mode != MAR_FOLLOW_PAPER;
     for (size_t b = 0; bands && b < f->band.bands; b++) {
         int started = f->band.lvl_started;
         f->band.ring[slot * f->band.bands + b] = feature(&f->band.lvl[b], &started, level_db(fr->bands[b]),
@@ -1565,7 +1608,7 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     int was_following = f->ever && f->state != MAR_FOLLOW_SEARCHING;
     f->kf.p = e->p;
     f->kf.r = e->r;
-    if (f->onsets && f->opt.mode == MAR_FOLLOW_SMOOTH)
+    if (f->onsets && f->opt.mode != MAR_FOLLOW_PAPER)
         second_opinion(f, usable(f, e->since, e->frames));
     if (f->opt.mode == MAR_FOLLOW_PAPER)
         f->kf.p = floor(f->kf.p + 0.5), f->kf.r = 1.0;
@@ -2046,7 +2089,7 @@ static void run_search(mar_follow *f, uint32_t *flags)
     prepare_search(f);
     if (f->m_eff == 0)
         return;
-    sweep(f);
+    sweep(f, (size_t)f->opt.search_budget);
     cand *e = next_to_verify(f);
     if (e)
         verify(f, e);
@@ -2317,6 +2360,298 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
     }
 }
 
+/* --- the model (mode MAR_FOLLOW_MODEL) ----------------------------------
+ *
+ * The smooth mode's tracker (track_smooth) and whole-piece search (sweep,
+ * verify) measure; two beliefs of the tape deck model (mar_follow_deck.h)
+ * decide, where the smooth mode has its rules:
+ *   motion: playing or stopped, from each frame's level against the music
+ *     expected at the place and the noise floor: a stop is PAUSED, a start
+ *     resumes from where it stopped;
+ *   place: the followed place, each of the search's verified candidates and
+ *     "somewhere else", each scored on the same live window: the followed
+ *     place has the prior, a candidate that of a jump. The followed place's
+ *     posterior is the confidence (LOCKED from lock_confidence on); a
+ *     candidate more probable than it takes over (a jump, or a first lock).
+ * The cue's start (music_started) is still the smooth mode's. */
+
+/* The music a playing deck shows now [dB]: the stored level at the place
+ * plus the volume; stopped, the loudest of what it would play on restart. */
+static double model_expected_db(const mar_follow *f)
+{
+    if (f->state != MAR_FOLLOW_PAUSED)
+        return stored_db_at(f, f->kf.p - 0.5 * f->kf.r - 0.5) + f->gain;
+    double loud = -INFINITY;
+    for (size_t k = 0; k < f->tk.resume_look; k++)
+        loud = fmax(loud, stored_db_at(f, f->frozen + (double)k));
+    return loud + f->gain;
+}
+
+/* The motion belief takes this frame; the deck stops (PAUSED, back to where
+ * the evidence for it began) or starts (from where it stopped, at the first
+ * frame of the evidence for it). */
+static void model_motion(mar_follow *f, uint32_t *flags)
+{
+    double db = f->ldb[ring(f, f->t)];
+    double ev;
+    if (f->state != MAR_FOLLOW_PAUSED && !f->probation) {
+        ev = mar_deck_level_evidence(db, model_expected_db(f), f->nf, f->opt.level_sigma, f->opt.level_cap);
+    } else {
+        /* stopped, or restarted and not yet measured, the volume may have
+         * changed: music is any frame that stands out of the hiss heard
+         * since the stop */
+        ev = mar_deck_hiss_evidence(db, f->pause_db, fmax(MODEL_HISS_SIGMA, f->pause_dev), MODEL_MUSIC_SPAN,
+                                    f->opt.level_cap);
+        if (ev > 0.0) {                          /* hiss: follow its level and wobble */
+            double prev = f->ldb[ring(f, f->t - 1)];
+            if (!isnan(prev))
+                f->pause_dev += f->tk.pause_alpha * (fabs(db - prev) - f->pause_dev);
+            f->pause_db += f->tk.pause_alpha * (db - f->pause_db);
+        }
+    }
+    if (ev <= 0.0)
+        f->stop_run = f->t + 1;                 /* a stop began after this frame, if at all */
+    if (ev >= 0.0)
+        f->play_run = f->t + 1;
+    mar_deck_motion_update(&f->motion, ev);
+    int stopped = mar_deck_stopped(&f->motion) > 0.5;
+    if (stopped && f->state != MAR_FOLLOW_PAUSED) {
+        uint64_t stop = f->stop_run > f->seg_start ? f->stop_run : f->seg_start;
+        double at = stop >= 1 && f->t - (stop - 1) < f->hcap - 1 ? f->lpos[ring(f, stop - 1)] : f->kf.p;
+        f->frozen = f->kf.p = at;
+        f->stop_at = stop;
+        f->pause_db = db;
+        f->pause_dev = 0.0;
+        f->state = MAR_FOLLOW_PAUSED;
+        f->c.pauses++;
+        stop_search(f);
+    } else if (!stopped && f->state == MAR_FOLLOW_PAUSED) {
+        uint64_t onset = f->play_run <= f->t ? f->play_run : f->t;
+        if (f->kf.r <= 0.0)
+            f->kf.r = 1.0;
+        f->kf.p = f->frozen + f->kf.r * ((double)(f->t + 1 - onset) - 0.5);
+        mar_kf_init(&f->kf, RESUME_VAR, f->kf.P11 + 1e-6);
+        f->seg_start = onset;
+        f->state = MAR_FOLLOW_HOLDING;          /* LOCKED again after a measurement at the restarted place */
+        f->have_gain = 0;                       /* the knob may have turned meanwhile: measured again */
+        f->probation = 1;                       /* (track_smooth: a short window places the restart) */
+        f->c.resumes++;
+        *flags |= MAR_FOLLOW_F_JUMP;
+    }
+}
+
+/* The search beside, all the time: its candidates are the place belief's
+ * rivals. While the followed place is clearly the most probable, it looks
+ * on at a fraction of its pace (MODEL_IDLE): a jump lowers that place's
+ * posterior (its fit falls under the rest of the piece's), and the search
+ * runs at full pace again. */
+static void model_search(mar_follow *f, uint32_t *flags)
+{
+    int idle = f->proven && f->conf >= f->opt.lock_confidence;
+    if (!f->searching)
+        start_search(f, f->seg_start);
+    f->c.search_steps++;
+    *flags |= MAR_FOLLOW_F_SEARCH;
+    for (int i = 0; i < POOL; i++)
+        if (f->pool[i].used)
+            f->pool[i].p += f->pool[i].r;
+    prepare_search(f);
+    if (f->m_eff == 0)
+        return;
+    size_t budget = (size_t)f->opt.search_budget;
+    sweep(f, idle ? (budget + MODEL_IDLE - 1) / MODEL_IDLE : budget);
+    cand *e = idle && f->t % MODEL_IDLE ? NULL : next_to_verify(f);
+    if (e)
+        verify(f, e);
+    dedup(f);
+}
+
+/* The place belief: the followed place (when there is one), the pool's
+ * verified candidates and somewhere else, each scored on the same newest
+ * live frames (one candidate rescored per tick).
+ *
+ * Not proven yet (nothing followed, or only a cue or a place just taken
+ * over): the scores of this window decide, the followed place with its
+ * prior (1 - MODEL_CUE_DOUBT),
+ * somewhere else as the worst candidate kept (the search keeps the best
+ * places). Once a whole sweep has been scored, the most probable place
+ * is taken from lock_confidence on: a candidate (a lock), or the cue's
+ * place (proven).
+ *
+ * Proven: the evidence adds up over time, a window's worth in a window's
+ * time (each log weight moves by its log-likelihood, less the best one's,
+ * over the window's length per tick); somewhere else is a place that fits
+ * a little less well (MODEL_ELSE_Z) than the music usually fits here
+ * (rho_usual); no place falls further behind the best than the tape
+ * jumping there within a tick (log_share); a candidate more probable than
+ * the followed place takes over, and proves itself as a cue does.
+ *
+ * Returns the followed place's posterior (0 with none followed). */
+static double model_place(mar_follow *f, uint32_t *flags)
+{
+    if (f->proven && f->conf >= f->opt.lock_confidence && f->t - f->belief_t < MODEL_IDLE)
+        return f->conf;                         /* clear: looked at every MODEL_IDLE ticks */
+    size_t ages = usable(f, f->located ? f->seg_start : f->search_from, f->tk.window);
+    if (ages < f->tk.min_window)
+        return f->conf;
+    double n_eff = (double)ages * (double)f->main->bands * f->tk.evidence_per_frame;
+    if (f->located)
+        f->lead_rho = score_on(f, f->kf.p, f->kf.r > 0.0 ? f->kf.r : 1.0, ages);
+    for (int k = 0; k < POOL; k++) {            /* the next verified candidate gets a fresh score */
+        cand *e = &f->pool[f->rescore = (f->rescore + 1) % POOL];
+        if (e->used && !isnan(e->fine)) {
+            e->rho = score_on(f, e->p, e->r, ages);
+            break;
+        }
+    }
+    double ll[POOL + 1], log_w[POOL + 1], post[POOL + 1];
+    cand *who[POOL];
+    size_t n = 0, best = 0;
+    double rho_else = 0.0;
+    for (int i = 0; i < POOL; i++) {
+        cand *e = &f->pool[i];
+        if (!e->used || isnan(e->fine) || isnan(e->rho) || (f->located && fabs(e->p - f->kf.p) < DISTINCT))
+            continue;
+        rho_else = n ? fmin(rho_else, e->rho) : e->rho;
+        who[n] = e;
+        ll[n++] = mar_deck_place_evidence(e->rho, n_eff);
+    }
+    ll[n] = mar_deck_place_evidence(f->lead_rho, n_eff);     /* (with one followed) */
+    size_t places = n + (size_t)f->located;
+    if (!f->proven) {
+        double doubt = f->located ? log(MODEL_CUE_DOUBT) : 0.0;
+        for (size_t i = 0; i < n; i++)
+            log_w[i] = doubt + ll[i];
+        log_w[n] = ll[n];
+        mar_deck_posterior(log_w, places, doubt + mar_deck_place_evidence(rho_else, n_eff), post);
+        for (size_t i = 1; i < n; i++)
+            if (post[i] > post[best])
+                best = i;
+        int looked = f->sweeps_done >= 1;
+        if (f->located && looked && post[n] >= f->opt.lock_confidence) {
+            f->proven = 1;                      /* the cue's place, confirmed */
+            f->lead_belief = 0.0;
+            f->else_belief = f->tk.log_share;
+            f->belief_t = f->t;
+        }
+        if (n == 0 || !looked || who[best]->frames < f->tk.min_window || who[best]->confirmed < 1
+            || post[best] < f->opt.lock_confidence)
+            return f->located ? post[n] : n ? post[best] : 0.0;
+    } else {
+        /* (a shorter window fits better: the usual fit is that of whole windows) */
+        if (ages == f->tk.window && !isnan(f->lead_rho))
+            f->rho_usual = isnan(f->rho_usual) ? f->lead_rho
+                : f->rho_usual + fmin(1.0, (double)(f->t - f->belief_t) / f->tk.usual) * (f->lead_rho - f->rho_usual);
+        double usual = isnan(f->rho_usual) ? 0.0 : tanh(atanh(fmin(f->rho_usual, 0.999)) - MODEL_ELSE_Z);
+        double ll_else = mar_deck_place_evidence(fmax(rho_else, usual), n_eff);
+        double top = fmax(ll_else, ll[n]);
+        for (size_t i = 0; i < n; i++)
+            top = fmax(top, ll[i]);
+        /* the evidence of the ticks since the last update, a window's worth per window */
+        double W = (double)f->tk.window / (double)(f->t - f->belief_t), most = -INFINITY;
+        f->lead_belief += (ll[n] - top) / W;
+        f->else_belief += (ll_else - top) / W;
+        for (size_t i = 0; i < n; i++) {
+            if (!isnan(who[i]->belief))
+                who[i]->belief += (ll[i] - top) / W;
+            most = fmax(most, who[i]->belief);
+        }
+        most = fmax(most, fmax(f->lead_belief, f->else_belief));
+        double floor_w = most + f->tk.log_share;    /* the tape may always have jumped there */
+        f->lead_belief = fmax(f->lead_belief, floor_w);
+        f->else_belief = fmax(f->else_belief, floor_w);
+        for (size_t i = 0; i < n; i++)
+            log_w[i] = who[i]->belief = isnan(who[i]->belief) ? floor_w : fmax(who[i]->belief, floor_w);
+        log_w[n] = f->lead_belief;
+        mar_deck_posterior(log_w, places, f->else_belief, post);
+        f->belief_t = f->t;
+        for (size_t i = 1; i < n; i++)
+            if (post[i] > post[best])
+                best = i;
+        if (n == 0 || who[best]->frames < f->tk.min_window || post[best] <= post[n])
+            return post[n];
+    }
+    double taken = post[best];
+    int jumped = f->proven;                     /* taken over from a followed place, not a lock */
+    lock_on(f, who[best], flags);               /* (clears the pool) */
+    mar_kf_init(&f->kf, 1.0, MODEL_LOCK_RATE_VAR);
+    f->located = 1;
+    /* a first lock has beaten a whole sweep's candidates on its window; a
+     * place taken over from another has only beaten the followed one, and
+     * proves itself as a cue does */
+    f->proven = !jumped;
+    f->lead_rho = NAN;
+    f->lead_belief = 0.0;
+    f->else_belief = f->tk.log_share;
+    f->belief_t = f->t;
+    mar_deck_motion_init(&f->motion, 0.0, f->tk.stop_hazard, f->tk.start_hazard);
+    return taken;
+}
+
+/* One step of the model (after take_frame). */
+static void step_model(mar_follow *f, int have, uint32_t *flags)
+{
+    /* 1. the clock */
+    if (f->state == MAR_FOLLOW_WAITING) {
+        uint64_t onset;
+        if (music_started(f, have, &onset)) {
+            play_from_cue(f, onset);
+            f->cue_pending = 0;                 /* the place belief decides, with the cue as its prior */
+            f->located = 1;
+            stop_search(f);                     /* a fresh sweep over the music since its onset */
+            start_search(f, onset);
+            f->lead_belief = 0.0;
+            f->else_belief = log(MODEL_CUE_DOUBT);
+            f->belief_t = f->t;
+            f->proven = 0;                      /* a cue is a claim until the search has looked around */
+            mar_deck_motion_init(&f->motion, 0.0, f->tk.stop_hazard, f->tk.start_hazard);
+        }
+    } else if (f->state != MAR_FOLLOW_PAUSED && f->located) {
+        mar_kf_predict(&f->kf, f->tk.rate_var);
+    }
+    /* 2. the motion, where the place is believed (the music expected
+     *    elsewhere says nothing about whether this music plays) */
+    if (f->located && have && f->have_gain && f->state != MAR_FOLLOW_WAITING
+        && (f->conf >= 0.5 || f->state == MAR_FOLLOW_PAUSED))
+        model_motion(f, flags);
+    /* 3. the tracker */
+    int quiet = 0;
+    if (f->located && f->state != MAR_FOLLOW_PAUSED && f->state != MAR_FOLLOW_WAITING) {
+        if (track_smooth(f, &quiet, flags)) {
+            f->measured = 1;
+            f->probation = 0;
+            f->last_good = f->t;
+            f->bad_since = 0;
+            f->c.measurements++;
+        } else if (!quiet && have && ++f->bad_since == (uint64_t)f->tk.hold_after) {
+            /* the line went astray (a rate taken from too short a window, a
+             * drift): the peaks lie beyond the gate; widen the filter's
+             * uncertainty so that its lags reach them again */
+            mar_kf_init(&f->kf, fmax(f->kf.P00, MODEL_ASTRAY_VAR_P), fmax(f->kf.P11, MODEL_ASTRAY_VAR_R));
+        }
+        update_gain(f, f->kf.p, f->kf.r > 0.0 ? f->kf.r : 1.0, f->have_gain ? 1 : f->tk.window);
+        if (quiet == 1)
+            *flags |= MAR_FOLLOW_F_QUIET;
+    }
+    /* 4. the search and the place belief (waiting at the cue too: the music
+     *    may start elsewhere, or too softly for music_started) */
+    if (f->state == MAR_FOLLOW_PAUSED)
+        return;
+    if (have)
+        model_search(f, flags);
+    f->conf = model_place(f, flags);            /* (waiting, a lock may end the wait) */
+    if (f->state == MAR_FOLLOW_WAITING && !f->located)
+        return;
+    if (!f->located)
+        f->state = MAR_FOLLOW_SEARCHING;
+    else
+        /* LOCKED: the place proven, probable, and measured recently, since
+         * the tape last restarted */
+        f->state = f->proven && f->conf >= f->opt.lock_confidence && f->last_good >= f->seg_start
+                           && (double)(f->t - f->last_good) <= f->tk.hold_after ? MAR_FOLLOW_LOCKED
+                                                                                 : MAR_FOLLOW_HOLDING;
+}
+
 void mar_follow_step(mar_follow *f, double live, mar_follow_out *out)
 {
     mar_follow_step_onset(f, live, NAN, out);
@@ -2330,14 +2665,9 @@ void mar_follow_step_onset(mar_follow *f, double live, double onset, mar_follow_
     step_frame(f, isnan(live) ? NULL : &frame, out);
 }
 
-/* One step with this frame (NULL: none). */
-static void step_frame(mar_follow *f, const mar_follow_frame *frame, mar_follow_out *out)
+/* Steps 1 to 3 of the smooth and the paper mode (after take_frame). */
+static void step_rules(mar_follow *f, int have, uint32_t *flags)
 {
-    uint32_t flags = 0;
-    int have;
-    f->c.steps++;
-    take_frame(f, frame, &flags, &have);
-
     /* 1. the clock: where the music is now, before this frame is looked at */
     int resumed = 0;
     uint64_t music_from;
@@ -2345,7 +2675,7 @@ static void step_frame(mar_follow *f, const mar_follow_frame *frame, mar_follow_
         if (music_started(f, have, &music_from))
             play_from_cue(f, music_from);
     } else if (f->state == MAR_FOLLOW_PAUSED)
-        resumed = resume_now(f, have, &flags);
+        resumed = resume_now(f, have, flags);
     else if (f->state == MAR_FOLLOW_SEARCHING)
         f->kf.p += f->ever ? f->kf.r : 0.0;                 /* flywheel, or nothing known yet */
     else if (f->opt.mode == MAR_FOLLOW_PAPER)
@@ -2369,31 +2699,45 @@ static void step_frame(mar_follow *f, const mar_follow_frame *frame, mar_follow_
             }
         }
         else if (!resumed || f->opt.mode == MAR_FOLLOW_SMOOTH)
-            follow(f, have, &flags);
+            follow(f, have, flags);
         if (f->cue_pending && f->cue_fits < CUE_FITS && f->state != MAR_FOLLOW_PAUSED)
-            cue_fit(f, &flags);
+            cue_fit(f, flags);
         else if (f->cue_refine && f->state == MAR_FOLLOW_LOCKED && !f->doubt && !f->probation)
             cue_refine(f);
     }
 
     /* 3. the searches, when not locked or in doubt */
     if (f->near && f->state != MAR_FOLLOW_PAUSED && !resumed)
-        near_search(f, &flags);
+        near_search(f, flags);
     if ((f->state == MAR_FOLLOW_SEARCHING || f->state == MAR_FOLLOW_WAITING) && have)
         search_gap(f);
     else
         f->gap_run = 0;
     if (f->searching)
-        run_search(f, &flags);
+        run_search(f, flags);
     if (f->state == MAR_FOLLOW_SEARCHING) {
         f->conf = 0.0;
         if (!f->ever)
             f->kf.r = 0.0;
     }
+}
+
+/* One step with this frame (NULL: none). */
+static void step_frame(mar_follow *f, const mar_follow_frame *frame, mar_follow_out *out)
+{
+    uint32_t flags = 0;
+    int have;
+    f->c.steps++;
+    take_frame(f, frame, &flags, &have);
+
+    if (f->opt.mode == MAR_FOLLOW_MODEL)
+        step_model(f, have, &flags);
+    else
+        step_rules(f, have, &flags);
 
     /* 4. limits */
     int still = f->state == MAR_FOLLOW_PAUSED || f->state == MAR_FOLLOW_WAITING;
-    if (f->opt.mode == MAR_FOLLOW_SMOOTH && !still && f->ever) {
+    if (f->opt.mode != MAR_FOLLOW_PAPER && !still && f->ever) {
         if (f->kf.r < f->opt.rate_min)
             f->kf.r = f->opt.rate_min, flags |= MAR_FOLLOW_F_RATE_LIMIT;
         if (f->kf.r > f->opt.rate_max)

@@ -44,6 +44,8 @@
 enum mar_follow_mode {
     MAR_FOLLOW_SMOOTH = 0,          /* fractional position and rate (default) */
     MAR_FOLLOW_PAPER = 1,           /* double or skip one stored sample per tick */
+    MAR_FOLLOW_MODEL = 2,           /* smooth tracking, decisions by a model of the tape deck
+                                     * (ext/mar_follow_deck.h): experimental, issue 21 */
 };
 
 enum mar_follow_state {
@@ -71,8 +73,9 @@ enum mar_follow_state {
  * list. Times are in seconds, whatever the tick: mar_follow_create turns
  * them into ticks of opt.tick_period. */
 #define MAR_FOLLOW_OPTIONS(X)                                                                        \
-    X(mode, int, MAR_FOLLOW_SMOOTH, 0, 1, "",                                                        \
-      "smooth: fractional position and rate; paper: double or skip one stored sample per tick")      \
+    X(mode, int, MAR_FOLLOW_SMOOTH, 0, 2, "",                                                        \
+      "smooth: fractional position and rate; paper: double or skip one stored sample per tick; "     \
+      "model: smooth, decided by the tape deck model")                                               \
     X(rate_min, double, 0.90, 0.25, 1.0, "1", "slowest playback rate")                              \
     X(rate_max, double, 1.10, 1.0, 4.0, "1", "fastest playback rate")                               \
     X(latency, double, 0.0, 0.0, 10.0, "s",                                                         \
@@ -104,7 +107,16 @@ enum mar_follow_state {
     X(rate_walk, double, 2e-6, 0.0, 1.0, "1/s",                                                     \
       "how fast the rate may wander: its variance grows this much per second")                      \
     X(onset_weight, double, 12.0, 0.0, 100.0, "dB/dB",                                              \
-      "with onsets: onset feature = loudness feature + this times the onset strength")
+      "with onsets: onset feature = loudness feature + this times the onset strength")              \
+    X(stop_every, double, 120.0, 0.1, 1e9, "s", "model: a playing deck stops once in this long, a priori") \
+    X(stop_for, double, 3.0, 0.02, 1e9, "s", "model: a stopped deck starts again within this, a priori") \
+    X(jump_every, double, 300.0, 0.1, 1e9, "s", "model: the tape jumps once in this long, a priori") \
+    X(level_sigma, double, 6.0, 0.1, 100.0, "dB",                                                   \
+      "model: a frame's level strays this far from what playing or stopping predicts, 1 sigma")     \
+    X(level_cap, double, 2.0, 0.01, 100.0, "1", "model: one frame's evidence on the motion, at most") \
+    X(evidence_rate, double, 5.0, 0.01, 1000.0, "1/s",                                              \
+      "model: independent values per second and band in a correlation window")                      \
+    X(lock_confidence, double, 0.95, 0.5, 0.999999, "1", "model: a place this probable is LOCKED")
 
 typedef struct {
     double tick_period;         /* the follower's step [s]: one stored frame per tick (the engine's own) */

@@ -21,6 +21,7 @@ cdef extern from "mar_follow.h" nogil:
     enum:
         MAR_FOLLOW_SMOOTH
         MAR_FOLLOW_PAPER
+        MAR_FOLLOW_MODEL
         MAR_FOLLOW_SEARCHING
         MAR_FOLLOW_LOCKED
         MAR_FOLLOW_HOLDING
@@ -102,7 +103,7 @@ cdef extern from "mar_follow.h" nogil:
 
 
 MAX_BANDS = MAR_FOLLOW_MAX_BANDS     # band levels per frame, at most
-MODES = {"smooth": MAR_FOLLOW_SMOOTH, "paper": MAR_FOLLOW_PAPER}
+MODES = {"smooth": MAR_FOLLOW_SMOOTH, "paper": MAR_FOLLOW_PAPER, "model": MAR_FOLLOW_MODEL}
 STATES = ("searching", "locked", "holding", "paused", "waiting")    # index = state code
 SEARCHING, LOCKED, HOLDING, PAUSED, WAITING = (MAR_FOLLOW_SEARCHING, MAR_FOLLOW_LOCKED,
                                                MAR_FOLLOW_HOLDING, MAR_FOLLOW_PAUSED,

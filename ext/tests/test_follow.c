@@ -12,6 +12,7 @@
 
 #include "mar_follow.h"
 #include "mar_follow_corr.h"
+#include "mar_follow_deck.h"
 #include "mar_follow_kf.h"
 
 #include "mar_test.h"
@@ -144,7 +145,7 @@ static void test_random_inputs(int cases)
             stored_onset[i] = fabs(sin(0.37 * (double)i + (double)c));
         mar_follow_options o;
         mar_follow_default_options(&o);
-        o.mode = c % 3 == 2 ? MAR_FOLLOW_PAPER : MAR_FOLLOW_SMOOTH;
+        o.mode = c % 3 == 2 ? MAR_FOLLOW_PAPER : c >= 12 ? MAR_FOLLOW_MODEL : MAR_FOLLOW_SMOOTH;    /* model: 12, 13, 15, 16 */
         o.search_budget = (int)uniform(1.0, 2000.0);
         o.latency = uniform(0.0, 0.06);
         int status = 0;
@@ -471,15 +472,114 @@ static void test_kf(int cases)
     CHECK(nees > 1.7 && nees < 2.3, "NEES %.3f, a consistent filter gives 2", nees);
 }
 
+/* The deck model's motion belief at the follower's defaults (20 ms frames,
+ * a stop a priori once in 120 s, a start within 3 s, level spread 6 dB,
+ * each frame's evidence capped at 2). */
+static mar_deck_motion playing_deck(void)
+{
+    mar_deck_motion m;
+    mar_deck_motion_init(&m, 0.0, 0.02 / 120.0, 0.02 / 3.0);
+    return m;
+}
+
+/* Frames of the motion belief until P(stopped) passes 0.5 (or crosses back
+ * below it, when stopped), at most n; frames at db [dB] where the music
+ * expected lies at expected [dB] over a floor at floor_db [dB], each
+ * wobbling by +-wobble [dB]. */
+static int frames_to_turn(mar_deck_motion *m, int n, double db, double expected, double floor_db, double wobble)
+{
+    int was = mar_deck_stopped(m) > 0.5;
+    for (int k = 1; k <= n; k++) {
+        double ev = mar_deck_level_evidence(db + uniform(-wobble, wobble), expected + uniform(-wobble, wobble),
+                                            floor_db, 6.0, 2.0);
+        mar_deck_motion_update(m, ev);
+        if ((mar_deck_stopped(m) > 0.5) != was)
+            return k;
+    }
+    return n + 1;
+}
+
+static void test_deck_motion(int cases)
+{
+    for (int c = 0; c < cases; c++) {
+        double floor_db = uniform(-90.0, -40.0), loud = uniform(20.0, 50.0);     /* [dB], [dB over the floor] */
+        /* silence where music is expected: stopped within half a second */
+        mar_deck_motion m = playing_deck();
+        int k = frames_to_turn(&m, 100, floor_db, floor_db + loud, floor_db, 1.0);
+        CHECK(k <= 25, "case %d: silence %.0f dB under the music: stopped after %d frames", c, loud, k);
+        /* ... and the music back: playing within a few frames */
+        k = frames_to_turn(&m, 100, floor_db + loud, floor_db + loud, floor_db, 1.0);
+        CHECK(k <= 10, "case %d: music back: playing after %d frames", c, k);
+        /* a quiet passage (the music expected as quiet as the hiss) is no stop, however long */
+        m = playing_deck();
+        k = frames_to_turn(&m, 1500, floor_db, floor_db - uniform(0.0, 20.0), floor_db, 1.0);
+        CHECK(k > 1500, "case %d: a quiet passage read as a stop after %d frames", c, k);
+        /* music as loud as expected keeps it playing */
+        m = playing_deck();
+        k = frames_to_turn(&m, 1500, floor_db + loud, floor_db + loud, floor_db, 3.0);
+        CHECK(k > 1500, "case %d: music read as a stop after %d frames", c, k);
+        /* a dropout of two frames in the music is no stop */
+        m = playing_deck();
+        frames_to_turn(&m, 50, floor_db + loud, floor_db + loud, floor_db, 1.0);
+        k = frames_to_turn(&m, 2, floor_db, floor_db + loud, floor_db, 0.0);
+        CHECK(k > 2, "case %d: a dropout of 2 frames read as a stop", c);
+    }
+    /* the evidence: 0 where the two motions predict the same, its sign by the nearer one, capped */
+    CHECK(mar_deck_level_evidence(-60.0, -90.0, -60.0, 6.0, 2.0) > -1e-3
+          && mar_deck_level_evidence(-60.0, -90.0, -60.0, 6.0, 2.0) <= 0.0, "quiet music: evidence not ~0");
+    CHECK(mar_deck_level_evidence(-60.0, -30.0, -60.0, 6.0, 2.0) == 2.0, "hiss: evidence not capped at +2");
+    CHECK(mar_deck_level_evidence(-30.0, -30.0, -60.0, 6.0, 2.0) == -2.0, "music: evidence not capped at -2");
+    CHECK(mar_deck_level_evidence(NAN, -30.0, -60.0, 6.0, 2.0) == 0.0, "no frame: evidence not 0");
+}
+
+static void test_deck_place(int cases)
+{
+    for (int c = 0; c < cases; c++) {
+        double n_eff = uniform(10.0, 500.0), rho = uniform(0.05, 0.95), more = uniform(0.001, 0.04);
+        /* a better fit, or more of the same fit, is more likely; no fit is no evidence */
+        CHECK(mar_deck_place_evidence(rho + more, n_eff) > mar_deck_place_evidence(rho, n_eff),
+              "case %d: a better fit is not more likely", c);
+        CHECK(mar_deck_place_evidence(rho, 2.0 * n_eff) > mar_deck_place_evidence(rho, n_eff),
+              "case %d: more values of the same fit are not more likely", c);
+        CHECK(mar_deck_place_evidence(-rho, n_eff) == 0.0 && mar_deck_place_evidence(NAN, n_eff) == 0.0,
+              "case %d: no fit is evidence", c);
+        /* the posterior: sums to 1, ordered as the weights, moved by the evidence toward the better place */
+        double log_w[4], post[4], prior[4];
+        for (int i = 0; i < 4; i++)
+            prior[i] = log_w[i] = uniform(-8.0, 0.0);
+        double other = uniform(-10.0, 0.0);
+        double rest = mar_deck_posterior(log_w, 4, other, post);
+        double sum = rest;
+        int top = 0;
+        for (int i = 0; i < 4; i++) {
+            sum += post[i];
+            if (log_w[i] > log_w[top])
+                top = i;
+        }
+        CHECK(fabs(sum - 1.0) < 1e-12, "case %d: the posterior sums to %.15f", c, sum);
+        for (int i = 0; i < 4; i++)
+            CHECK(post[i] <= post[top] && (post[i] > rest) == (log_w[i] > other), "case %d: order", c);
+        int right = (int)uniform(0.0, 3.999);
+        for (int i = 0; i < 4; i++)
+            log_w[i] = prior[i] + mar_deck_place_evidence(i == right ? 0.9 : 0.5, 200.0);
+        double before = post[right];
+        mar_deck_posterior(log_w, 4, other + mar_deck_place_evidence(0.5, 200.0), post);
+        CHECK(post[right] > before && post[right] > 0.99, "case %d: the right place at %.3f after the evidence",
+              c, post[right]);
+    }
+}
+
 int main(void)
 {
     test_bad_options();
-    test_random_inputs(12);
+    test_random_inputs(18);
     test_follows();
     test_corr_lags(300);
     test_corr_along_a_line(200);
     test_corr_peak(300);
     test_kf(300);
+    test_deck_motion(200);
+    test_deck_place(300);
     if (failures) {
         fprintf(stderr, "%d checks failed\n", failures);
         return 1;

@@ -347,7 +347,7 @@ def check_targets(result: dict, targets=TARGETS) -> list[tuple[str, float, bool]
 
 def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED, progress=None,
             seeds: int = SEEDS, real: list | tuple = (), real_note: str = "",
-            use_bands: bool = True) -> list[dict]:
+            use_bands: bool = True, tracker: str = "smooth") -> list[dict]:
     """One result per mode (smooth, paper) with the documented keys, over
     the scenarios of seeds seed, seed + 1, ... (seeds of them), the
     follower on the band levels (use_bands, as a show made by teach) or on
@@ -356,7 +356,8 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
     "wrong cue", "wrong cue, unknown". Each result says its "start"
     ("unknown" for the first two). real: recordings.Recording, played as
     the synthesized pieces are; real_note: why some are missing (the
-    table's note)."""
+    table's note); tracker: the mode in the smooth mode's place ("model":
+    the tape deck model, issue 21)."""
     pieces = {}
     for style, s in (PIECES[:1] if quick else PIECES):
         pieces[style] = synthesize(style, seed=s)
@@ -392,7 +393,7 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
             live_bands = sync_ticks(fit_frames(bands(played.samples, played.sample_rate), len(live) - 1))
         return played, (live, live_onsets, live_bands)
 
-    def follow(sc, live, mode="smooth", cue=None):
+    def follow(sc, live, mode=tracker, cue=None):
         follower = Follower(stored[sc.piece], mode=mode, onset=stored_onsets[sc.piece],
                             bands=stored_bands[sc.piece])
         if cue is not None:
@@ -412,12 +413,12 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
         return m
 
     per_set: dict[tuple[str, str], list] = {(mode, start): [] for mode, start in (
-        ("smooth", "unknown"), ("paper", "unknown"), ("smooth", "cue at top"), ("smooth", "top, unknown"),
-        ("smooth", "wrong cue"), ("smooth", "wrong cue, unknown"))}
+        (tracker, "unknown"), ("paper", "unknown"), (tracker, "cue at top"), (tracker, "top, unknown"),
+        (tracker, "wrong cue"), (tracker, "wrong cue, unknown"))}
     for sc in runs:
         t0 = time.perf_counter()
         played, live = live_of(sc)
-        for mode in ("smooth", "paper"):
+        for mode in (tracker, "paper"):
             track = follow(sc, live, mode)
             per_set[mode, "unknown"].append(row(measure(track, played, track.ns), sc, played))
         if progress:
@@ -430,7 +431,7 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
         for start, cue in (("cue at top", 0.0), ("top, unknown", None)):
             track = follow(sc, live, cue=cue)
             m = measure(track, played, None, from_s=onset + CUE_FROM_S, onset_s=onset)
-            per_set["smooth", start].append(row(every_tick(m, track, played), sc, played))
+            per_set[tracker, start].append(row(every_tick(m, track, played), sc, played))
         if progress:
             progress(f"{sc.name} from the top, cued and not: {len(played.truth) * T:.0f} s of live "
                      f"audio, {time.perf_counter() - t0:.1f} s")
@@ -442,8 +443,8 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
         track = follow(sc, live)
         unknown = every_tick(measure(track, played), track, played)
         cued["later_s"] = wrong_cue_later(cued, unknown)
-        per_set["smooth", "wrong cue"].append(row(cued, sc, played))
-        per_set["smooth", "wrong cue, unknown"].append(row(unknown, sc, played))
+        per_set[tracker, "wrong cue"].append(row(cued, sc, played))
+        per_set[tracker, "wrong cue, unknown"].append(row(unknown, sc, played))
         if progress:
             progress(f"{sc.name} from {sc.deck.start:.1f} s, cued at the top and not: "
                      f"{len(played.truth) * T:.0f} s of live audio, {time.perf_counter() - t0:.1f} s")
@@ -491,6 +492,7 @@ def format_table(results: list[dict]) -> str:
         lines.append(describe(results[0]["machine"]))
     lines.append("")
     unknown = [res for res in results if res.get("start", "unknown") == "unknown"]
+    tracker = next((res["mode"] for res in results if res["mode"] != "paper"), "smooth")
     head = (f"{'scenario':<20} {'mode':<7} {'speed':>5} {'snr':>4} {'within20':>8} {'within50':>8} "
             f"{'within200':>9} {'med_ms':>7} {'p95_ms':>8} {'lock_s':>6} {'pause_s':>7} {'jump_s':>6} "
             f"{'false':>5}")
@@ -527,28 +529,28 @@ def format_table(results: list[dict]) -> str:
                          f"p99 {s['us_per_tick_p99']:.2f}")
     lines.append("")
     for res in unknown:
-        if res["mode"] != "smooth":
+        if res["mode"] != tracker:
             continue
-        lines.append("targets, synthesized pieces (smooth mode; paper is the baseline beside it):")
+        lines.append(f"targets, synthesized pieces ({tracker} mode; paper is the baseline beside it):")
         lines += _target_lines(res, TARGETS)
-        lines.append("targets, real recordings (smooth mode):")
+        lines.append(f"targets, real recordings ({tracker} mode):")
         lines += _target_lines(res["real"], REAL_TARGETS)
     by_set = {(res["mode"], res.get("start", "unknown")): res for res in results}
-    if ("smooth", "unknown") in by_set:
+    if (tracker, "unknown") in by_set:
         lines.append("")
-        lines += _piece_lines(by_set)
-    if ("smooth", "cue at top") in by_set:
+        lines += _piece_lines(by_set, tracker)
+    if (tracker, "cue at top") in by_set:
         lines.append("")
-        lines += _cue_lines(by_set)
+        lines += _cue_lines(by_set, tracker)
     return "\n".join(lines)
 
 
-def _piece_lines(by_set: dict) -> list[str]:
-    """Smooth mode per piece (synthesized, then real), over its target
+def _piece_lines(by_set: dict, tracker: str = "smooth") -> list[str]:
+    """The smooth mode (or tracker) per piece (synthesized, then real), over its target
     runs: from an unknown start, and the top decks cued at 0 when run."""
-    unknown = by_set["smooth", "unknown"]["together"]["per_piece"]
-    cue = by_set.get(("smooth", "cue at top"), {}).get("together", {}).get("per_piece", {})
-    lines = ["per piece (smooth mode, target runs): unknown start as in the scenarios above; cue: the "
+    unknown = by_set[tracker, "unknown"]["together"]["per_piece"]
+    cue = by_set.get((tracker, "cue at top"), {}).get("together", {}).get("per_piece", {})
+    lines = [f"per piece ({tracker} mode, target runs): unknown start as in the scenarios above; cue: the "
              "top decks cued at 0 (accuracy from 1 s after the onset); worst50: the lowest within50 of "
              "one run", "",
              f"{'piece':<26} {'within20':>8} {'within50':>8} {'worst50':>8} {'lock_s med/max':>15} "
@@ -587,15 +589,15 @@ def _target_lines(res: dict, targets) -> list[str]:
     return lines
 
 
-def _cue_lines(by_set: dict) -> list[str]:
+def _cue_lines(by_set: dict, tracker: str = "smooth") -> list[str]:
     """The cue's sections of the table: the top decks cued and not, the
     wrong-cue decks cued and not, their summaries, the cost per tick and
     the cue's targets. by_set: (mode, start) -> result."""
-    cue, top = by_set["smooth", "cue at top"], by_set["smooth", "top, unknown"]
-    wrong, wrong_unknown = by_set["smooth", "wrong cue"], by_set["smooth", "wrong cue, unknown"]
-    smooth = by_set.get(("smooth", "unknown"))
+    cue, top = by_set[tracker, "cue at top"], by_set[tracker, "top, unknown"]
+    wrong, wrong_unknown = by_set[tracker, "wrong cue"], by_set[tracker, "wrong cue, unknown"]
+    smooth = by_set.get((tracker, "unknown"))
     nan = float("nan")                  # a figure of no runs (no calm decks in --quick)
-    lines = [f"cue at the top (smooth mode): the scenarios above started at the top, cued at 0 "
+    lines = [f"cue at the top ({tracker} mode): the scenarios above started at the top, cued at 0 "
              f"(\"cue\") and from an unknown start (\"unknown\") on the same audio; accuracy on the "
              f"ticks from {CUE_FROM_S:g} s after the music's onset; cue_lk_s: onset to the first tick "
              f"LOCKED within {CUE_LOCK_TOL_S * 1e3:g} ms [s]; false: entries into LOCKED more than "
@@ -613,7 +615,7 @@ def _cue_lines(by_set: dict) -> list[str]:
                          f"{_fmt(r['relock_after_jump_s_max'], '>6.2f')} {r['false_locks']:>5d}")
     lines.append("")
     lo, hi = WRONG_CUE_START_S                                             # [s]
-    lines.append(f"wrong cue (smooth mode): tapes started {lo:g}-{hi:g} s in, cued at the top and from "
+    lines.append(f"wrong cue ({tracker} mode): tapes started {lo:g}-{hi:g} s in, cued at the top and from "
                  f"an unknown start; lock_s: start of the run to the first tick LOCKED within 200 ms [s]; "
                  f"later_s: cued lock_s - unknown lock_s [s]; accuracy as in the scenarios above "
                  f"(from {ACCURACY_FROM_S:g} s)")
@@ -654,13 +656,13 @@ def _cue_lines(by_set: dict) -> list[str]:
                      ("wrong-cue decks, cued at the top (every tick)", wrong)):
         lines.append(f"  {label:<54} {s['us_per_tick_median']:6.2f} / {s['us_per_tick_p99']:6.2f}")
     lines.append("")
-    lines.append("targets, cue at top (smooth mode, target decks), synthesized pieces:")
+    lines.append(f"targets, cue at top ({tracker} mode, target decks), synthesized pieces:")
     lines += _target_lines(cue, CUE_TARGETS)
-    lines.append("targets, cue at top (smooth mode, target decks), real recordings:")
+    lines.append(f"targets, cue at top ({tracker} mode, target decks), real recordings:")
     lines += _target_lines(cue["real"], REAL_CUE_TARGETS)
-    lines.append("targets, wrong cue (smooth mode), synthesized pieces:")
+    lines.append(f"targets, wrong cue ({tracker} mode), synthesized pieces:")
     lines += _target_lines(wrong, WRONG_CUE_TARGETS)
-    lines.append("targets, wrong cue (smooth mode), real recordings:")
+    lines.append(f"targets, wrong cue ({tracker} mode), real recordings:")
     lines += _target_lines(wrong["real"], WRONG_CUE_TARGETS)
     return lines
 
@@ -686,6 +688,9 @@ def register(sub) -> None:
     parser.add_argument("--loudness-only", action="store_true",
                         help="follow on the loudness alone, as an older show without band levels "
                              "(default: the band levels, as a show made by teach)")
+    parser.add_argument("--model", action="store_true",
+                        help="the tape deck model (follow mode 'model', experimental) in the smooth "
+                             "mode's place")
     parser.add_argument("--music-dir", action="append", metavar="DIR",
                         help=f"real recordings (.ogg/.wav/.flac) from DIR, repeatable (default: "
                              f"${recordings.ENV}, else {', '.join(recordings.DEFAULT_DIRS)})")
@@ -697,13 +702,13 @@ def run(args) -> int:
     if progress:
         progress(f"real recordings: {', '.join(r.name for r in real) or 'none'}" + (f" ({note})" if note else ""))
     results = collect(args.seconds, args.quick, args.seed, progress, 1 if args.quick else args.seeds, real, note,
-                      use_bands=not args.loudness_only)
+                      use_bands=not args.loudness_only, tracker="model" if args.model else "smooth")
     if args.json:
         json.dump(results, sys.stdout, indent=2, default=float)
         sys.stdout.write("\n")
     else:
         print(format_table(results))
-    return exit_status((ok for res in results if res["mode"] == "smooth"
+    return exit_status((ok for res in results if res["mode"] != "paper"
                         for ok in (*res["targets"].values(), *res["real"].get("targets", {}).values())),
                        args.strict)
 

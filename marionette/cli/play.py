@@ -14,6 +14,7 @@ from marionette._core import FLAG_END
 from marionette.cli.options import (PRIORITY, Number, figure_and_show, figure_args, input_file,
                                     output_file)
 from marionette.cli.sync_sim import add_start_argument
+from marionette.config import FOLLOW_MODES
 from marionette.console import open_view
 from marionette import limiter_report
 from marionette.engine import DEFAULT_LEAD, FOLLOW_STATES, INTERPOLATIONS, LEAD_MODES, MAX_RATE, Engine
@@ -67,7 +68,7 @@ def register(sub) -> None:
                    help="write the setpoint frames to this file or device")
     p.add_argument("--link", help="send to servo nodes: serial:URL[@BAUD] or "
                                   "can:INTERFACE:CHANNEL[@BITRATE] (see 'marionette sim')")
-    p.add_argument("--follow", choices=("smooth", "paper"),
+    p.add_argument("--follow", choices=FOLLOW_MODES,
                    help="follow the live music (default mode with --music or --audio-device: "
                         "the figure's [follow] table)")
     p.add_argument("--music", type=input_file,
