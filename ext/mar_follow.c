@@ -197,6 +197,7 @@ typedef struct {
     double score;               /* its coarse score [1] */
     uint64_t t;                 /* step it was found */
     int used;
+    double rho;                 /* model: its score on the window of the place belief [1], NAN: none */
 } sweep_peak;
 
 typedef struct {
@@ -1029,7 +1030,7 @@ static void note_peak(mar_follow *f, double p, double score)
         sweep_peak *k = &f->peaks[i];
         if (k->used && fabs(k->p + (double)(f->t - k->t) - p) < DISTINCT) {
             if (score > k->score)
-                k->p = p, k->score = score, k->t = f->t;
+                k->p = p, k->score = score, k->t = f->t, k->rho = NAN;
             return;
         }
         if (!slot || (slot->used && (!k->used || k->score < slot->score)))
@@ -1037,7 +1038,7 @@ static void note_peak(mar_follow *f, double p, double score)
     }
     if (slot->used && slot->score >= score)
         return;
-    slot->p = p, slot->score = score, slot->t = f->t, slot->used = 1;
+    slot->p = p, slot->score = score, slot->t = f->t, slot->used = 1, slot->rho = NAN;
 }
 
 /* Offset sweep_o - 1 is a local maximum of the sweep: into the pool (if it
@@ -2466,6 +2467,41 @@ static void model_search(mar_follow *f, uint32_t *flags)
     dedup(f);
 }
 
+/* The best fit [1] of the last sweep's best places that are not listed
+ * (more than DISTINCT from the followed place and from each of the n
+ * candidates in who[]), each scored on the newest `ages` frames at the
+ * rate of the best listed place, one rescored per tick: the pool keeps 16
+ * places, and in music that repeats more than 16 can fit a short window. */
+static double unlisted_rho(mar_follow *f, cand *const *who, size_t n, size_t ages)
+{
+    double r = f->located ? f->kf.r : 1.0, top = -INFINITY;
+    for (size_t i = 0; i < n && !f->located; i++)
+        if (who[i]->rho > top)
+            top = who[i]->rho, r = who[i]->r;
+    if (!(r > 0.0))
+        r = 1.0;
+    double best = 0.0;
+    int rescored = 0;
+    for (int i = 0; i < PEAKS; i++) {
+        sweep_peak *k = &f->last_peaks[(f->t + (uint64_t)i) % PEAKS];
+        if (!k->used)
+            continue;
+        double p = k->p + r * (double)(f->t - k->t);
+        int listed = f->located && fabs(p - f->kf.p) < DISTINCT;
+        for (size_t j = 0; j < n && !listed; j++)
+            listed = fabs(p - who[j]->p) < DISTINCT;
+        if (listed)
+            continue;
+        if (!rescored) {
+            k->rho = score_on(f, p, r, ages);
+            rescored = 1;
+        }
+        if (!isnan(k->rho))
+            best = fmax(best, k->rho);
+    }
+    return best;
+}
+
 /* The place belief: the followed place (when there is one), the pool's
  * verified candidates and somewhere else, each scored on the same newest
  * live frames (one candidate rescored per tick).
@@ -2516,6 +2552,8 @@ static double model_place(mar_follow *f, uint32_t *flags)
         who[n] = e;
         ll[n++] = mar_deck_place_evidence(e->rho, n_eff);
     }
+    if (!f->proven)
+        rho_else = fmax(rho_else, unlisted_rho(f, who, n, ages));
     ll[n] = mar_deck_place_evidence(f->lead_rho, n_eff);     /* (with one followed) */
     size_t places = n + (size_t)f->located;
     if (!f->proven) {
