@@ -7,7 +7,6 @@ Live audio is synthesized music through the simulated tape deck, whose
 time warp is the truth; fixed seeds, several decks each."""
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -16,20 +15,11 @@ import pytest
 from marionette.music.bands import bands, fit_frames
 from marionette.music.feature import loudness, onsets
 from marionette.music.follower import STATES, FollowError, Follower, sync_ticks
-from marionette.sim.music import synthesize
 from marionette.sim.tape import Deck, play
+from taught_music import taught
 
 T = 0.020                                            # tick [s]
 LOCKED = STATES.index("locked")
-
-
-@functools.cache
-def taught(style, seed):
-    """A synthesized piece, its stored loudness, onsets and band levels."""
-    piece = synthesize(style, seed=seed)
-    loud = loudness(piece.samples, piece.sample_rate)
-    return (piece, loud, onsets(piece.samples, piece.sample_rate),
-            fit_frames(bands(piece.samples, piece.sample_rate), len(loud)))
 
 
 def live_frames(piece, deck):

@@ -6,7 +6,6 @@ time warp is the truth; fixed seeds, several decks each. The beliefs'
 update itself is unit-tested in C (ext/tests/test_follow.c)."""
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
@@ -15,21 +14,11 @@ import pytest
 from marionette.music.bands import bands, fit_frames
 from marionette.music.feature import loudness, onsets
 from marionette.music.follower import STATES, Follower, sync_ticks
-from marionette.sim.music import synthesize
 from marionette.sim.tape import Deck, play
+from taught_music import taught
 
 T = 0.020                                            # tick [s]
-MODE = "model"
 LOCKED, PAUSED = STATES.index("locked"), STATES.index("paused")
-
-
-@functools.cache
-def taught(style, seed):
-    """A synthesized piece, its stored loudness, onsets and band levels."""
-    piece = synthesize(style, seed=seed)
-    loud = loudness(piece.samples, piece.sample_rate)
-    return (piece, loud, onsets(piece.samples, piece.sample_rate),
-            fit_frames(bands(piece.samples, piece.sample_rate), len(loud)))
 
 
 def run(style, seed, deck, cue=None, use_bands=True):
@@ -39,7 +28,7 @@ def run(style, seed, deck, cue=None, use_bands=True):
     n = len(played.truth)
     live = sync_ticks(loudness(played.samples, played.sample_rate))[:n]
     live_rows = sync_ticks(fit_frames(bands(played.samples, played.sample_rate), len(live) - 1))
-    f = Follower(loud, onset=ons, bands=rows if use_bands else None, mode=MODE)
+    f = Follower(loud, onset=ons, bands=rows if use_bands else None, mode="model")
     if cue is not None:
         f.cue(cue)
     track = f.run(live, sync_ticks(onsets(played.samples, played.sample_rate))[:n],
