@@ -2546,7 +2546,11 @@ static double model_place(mar_follow *f, uint32_t *flags)
     double rho_else = 0.0;
     for (int i = 0; i < POOL; i++) {
         cand *e = &f->pool[i];
-        if (!e->used || isnan(e->fine) || isnan(e->rho) || (f->located && fabs(e->p - f->kf.p) < DISTINCT))
+        /* the followed place's own entry; proven, the tracker's lags reach
+         * its neighbours, not yet (a cue's onset is placed roughly) they are
+         * candidates in their own right */
+        double near = f->proven ? DISTINCT : TRACK_SEP;
+        if (!e->used || isnan(e->fine) || isnan(e->rho) || (f->located && fabs(e->p - f->kf.p) < near))
             continue;
         rho_else = n ? fmin(rho_else, e->rho) : e->rho;
         who[n] = e;
@@ -2557,9 +2561,10 @@ static double model_place(mar_follow *f, uint32_t *flags)
     ll[n] = mar_deck_place_evidence(f->lead_rho, n_eff);     /* (with one followed) */
     size_t places = n + (size_t)f->located;
     if (!f->proven) {
+        /* the cue's prior covers its neighbourhood (its onset is placed roughly) */
         double doubt = f->located ? log(MODEL_CUE_DOUBT) : 0.0;
         for (size_t i = 0; i < n; i++)
-            log_w[i] = doubt + ll[i];
+            log_w[i] = (fabs(who[i]->p - f->kf.p) < DISTINCT ? 0.0 : doubt) + ll[i];
         log_w[n] = ll[n];
         mar_deck_posterior(log_w, places, doubt + mar_deck_place_evidence(rho_else, n_eff), post);
         for (size_t i = 1; i < n; i++)
