@@ -373,7 +373,6 @@ struct mar_follow {
     mar_deck_motion motion;
     uint64_t stop_run;          /* first step of the newest run of frames that favour a stop */
     uint64_t play_run;          /* ... that favour playing */
-    double lead_rho;            /* the followed place's score on its window [1], NAN: none */
     double lead_belief, else_belief;    /* log weights of the followed place and of somewhere else [1] */
     uint64_t belief_t;          /* the step the place belief was last updated */
     int proven;                 /* the followed place has met a whole sweep's candidates (a cue has not) */
@@ -766,6 +765,18 @@ static void stop_search(mar_follow *f)
     clear_pool(f);
 }
 
+/* Model: a place is followed afresh (a reset, a cue's onset, a lock, a
+ * take-over): it alone weighs, somewhere else at a jump's share, and the
+ * deck plays. proven: the place needs no proof (mar_follow_deck.h). */
+static void model_follow_afresh(mar_follow *f, int proven)
+{
+    f->lead_belief = 0.0;
+    f->else_belief = f->tk.log_share;
+    f->belief_t = f->t;
+    f->proven = proven;
+    mar_deck_motion_init(&f->motion, 0.0, f->tk.stop_hazard, f->tk.start_hazard);
+}
+
 void mar_follow_reset(mar_follow *f, double position)
 {
     f->ticks_since_frame = f->unstepped = 0;
@@ -778,13 +789,8 @@ void mar_follow_reset(mar_follow *f, double position)
     f->doubt = f->probation = f->near = f->regaining = f->unproven = 0;
     f->gap_run = 0;
     f->h_slow = f->h_fast = 0.0;
-    mar_deck_motion_init(&f->motion, 0.0, f->tk.stop_hazard, f->tk.start_hazard);
+    model_follow_afresh(f, isfinite(position));     /* a known start (a seek) is given */
     f->stop_run = f->play_run = f->t + 1;
-    f->lead_rho = NAN;
-    f->lead_belief = 0.0;
-    f->else_belief = f->tk.log_share;
-    f->belief_t = f->t;
-    f->proven = isfinite(position);             /* a known start (a seek) is given */
     f->rho_usual = NAN;
     stop_search(f);
     if (isfinite(position)) {
@@ -2377,15 +2383,10 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
  * The cue's start (music_started) is still the smooth mode's. */
 
 /* The music a playing deck shows now [dB]: the stored level at the place
- * plus the volume; stopped, the loudest of what it would play on restart. */
+ * plus the volume. */
 static double model_expected_db(const mar_follow *f)
 {
-    if (f->state != MAR_FOLLOW_PAUSED)
-        return stored_db_at(f, f->kf.p - 0.5 * f->kf.r - 0.5) + f->gain;
-    double loud = -INFINITY;
-    for (size_t k = 0; k < f->tk.resume_look; k++)
-        loud = fmax(loud, stored_db_at(f, f->frozen + (double)k));
-    return loud + f->gain;
+    return stored_db_at(f, f->kf.p - 0.5 * f->kf.r - 0.5) + f->gain;
 }
 
 /* The motion belief takes this frame; the deck stops (PAUSED, back to where
@@ -2531,8 +2532,7 @@ static double model_place(mar_follow *f, uint32_t *flags)
     if (ages < f->tk.min_window)
         return f->conf;
     double n_eff = (double)ages * (double)f->main->bands * f->tk.evidence_per_frame;
-    if (f->located)
-        f->lead_rho = score_on(f, f->kf.p, f->kf.r > 0.0 ? f->kf.r : 1.0, ages);
+    double lead_rho = f->located ? score_on(f, f->kf.p, f->kf.r > 0.0 ? f->kf.r : 1.0, ages) : NAN;
     for (int k = 0; k < POOL; k++) {            /* the next verified candidate gets a fresh score */
         cand *e = &f->pool[f->rescore = (f->rescore + 1) % POOL];
         if (e->used && !isnan(e->fine)) {
@@ -2558,7 +2558,7 @@ static double model_place(mar_follow *f, uint32_t *flags)
     }
     if (!f->proven)
         rho_else = fmax(rho_else, unlisted_rho(f, who, n, ages));
-    ll[n] = mar_deck_place_evidence(f->lead_rho, n_eff);     /* (with one followed) */
+    ll[n] = mar_deck_place_evidence(lead_rho, n_eff);       /* (with one followed) */
     size_t places = n + (size_t)f->located;
     if (!f->proven) {
         /* the cue's prior covers its neighbourhood (its onset is placed roughly) */
@@ -2572,9 +2572,7 @@ static double model_place(mar_follow *f, uint32_t *flags)
                 best = i;
         int looked = f->sweeps_done >= 1;
         if (f->located && looked && post[n] >= f->opt.lock_confidence) {
-            f->proven = 1;                      /* the cue's place, confirmed */
-            f->lead_belief = 0.0;
-            f->else_belief = f->tk.log_share;
+            f->proven = 1;                      /* the cue's place, confirmed: its evidence adds up from now */
             f->belief_t = f->t;
         }
         if (n == 0 || !looked || who[best]->frames < f->tk.min_window || who[best]->confirmed < 1
@@ -2582,9 +2580,9 @@ static double model_place(mar_follow *f, uint32_t *flags)
             return f->located ? post[n] : n ? post[best] : 0.0;
     } else {
         /* (a shorter window fits better: the usual fit is that of whole windows) */
-        if (ages == f->tk.window && !isnan(f->lead_rho))
-            f->rho_usual = isnan(f->rho_usual) ? f->lead_rho
-                : f->rho_usual + fmin(1.0, (double)(f->t - f->belief_t) / f->tk.usual) * (f->lead_rho - f->rho_usual);
+        if (ages == f->tk.window && !isnan(lead_rho))
+            f->rho_usual = isnan(f->rho_usual) ? lead_rho
+                : f->rho_usual + fmin(1.0, (double)(f->t - f->belief_t) / f->tk.usual) * (lead_rho - f->rho_usual);
         double usual = isnan(f->rho_usual) ? 0.0 : tanh(atanh(fmin(f->rho_usual, 0.999)) - MODEL_ELSE_Z);
         double ll_else = mar_deck_place_evidence(fmax(rho_else, usual), n_eff);
         double top = fmax(ll_else, ll[n]);
@@ -2622,12 +2620,7 @@ static double model_place(mar_follow *f, uint32_t *flags)
     /* a first lock has beaten a whole sweep's candidates on its window; a
      * place taken over from another has only beaten the followed one, and
      * proves itself as a cue does */
-    f->proven = !jumped;
-    f->lead_rho = NAN;
-    f->lead_belief = 0.0;
-    f->else_belief = f->tk.log_share;
-    f->belief_t = f->t;
-    mar_deck_motion_init(&f->motion, 0.0, f->tk.stop_hazard, f->tk.start_hazard);
+    model_follow_afresh(f, !jumped);
     return taken;
 }
 
@@ -2643,11 +2636,7 @@ static void step_model(mar_follow *f, int have, uint32_t *flags)
             f->located = 1;
             stop_search(f);                     /* a fresh sweep over the music since its onset */
             start_search(f, onset);
-            f->lead_belief = 0.0;
-            f->else_belief = log(MODEL_CUE_DOUBT);
-            f->belief_t = f->t;
-            f->proven = 0;                      /* a cue is a claim until the search has looked around */
-            mar_deck_motion_init(&f->motion, 0.0, f->tk.stop_hazard, f->tk.start_hazard);
+            model_follow_afresh(f, 0);          /* a cue is a claim until the search has looked around */
         }
     } else if (f->state != MAR_FOLLOW_PAUSED && f->located) {
         mar_kf_predict(&f->kf, f->tk.rate_var);
