@@ -170,11 +170,11 @@
 #define ONSET_BACK_S 1.0        /* a resume looks this far back for the rise [s] */
 #define GAP_AHEAD_S 1.0         /* ... and this far ahead for a gap in the music [s] */
 #define CLEAR_WINDOW_S 1.0      /* clear music: the live level over this long (half of it heard) [s] */
-static const double CUE_FIT_AT_S[CUE_FITS] = {      /* ... this much music [s]: every 0.1 s */
-    0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4, 1.5, 1.6,     /* while the rate is open, */
-    1.7, 1.8, 1.9, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0, 5.5, 6.0,     /* then every 0.5 s */
-    6.5, 7.0, 7.5, 8.0, 8.5, 9.0, 9.5, 10.0};
-#define CUE_REFUTE_FIT 15       /* the fit (index) that refutes the cue when nothing fits (2 s) */
+static const double CUE_FIT_AT_S[CUE_FITS] = {      /* ... this much music [s]: from FIT_MIN_S every 0.1 s */
+    0.32, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4,   /* while the rate is open, */
+    1.5, 1.6, 1.7, 1.8, 1.9, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0,    /* then every 0.5 s */
+    5.5, 6.0, 6.5, 7.0, 7.5, 8.0, 8.5, 9.0};
+#define CUE_REFUTE_S 2.0        /* no fit by this much music refutes the cue [s] */
 #define CUE_RATE_SPAN 0.07      /* rates 1 +- this [stored ticks per tick] ... */
 #define CUE_RATE_STEP 0.005     /* ... in these steps */
 #define CUE_LAGS 5              /* offsets from the line through the cue, either way [ticks] */
@@ -245,6 +245,7 @@ typedef struct {
         long_hold, search_gap, leader, leader_wait;     /* [ticks] */
     size_t resume_min_window, fit_min, resume_look, onset_back, gap_ahead, clear_window;  /* [ticks] */
     size_t cue_fit_at[CUE_FITS];  /* [ticks] */
+    int cue_refute_fit;           /* the fit (index) that refutes the cue when nothing fits */
     double level_release, gain_step;    /* [dB per tick] */
     double gain_alpha, gain_slow_alpha, pause_alpha, h_fast, h_slow;   /* smoothing per tick [1] */
     /* the model's */
@@ -460,8 +461,12 @@ static int tick_options_of(const mar_follow_options *o, tick_options *tk, const 
     tk->onset_back = whole_ticks(ONSET_BACK_S, T);
     tk->gap_ahead = whole_ticks(GAP_AHEAD_S, T);
     tk->clear_window = whole_ticks(CLEAR_WINDOW_S, T);
-    for (int i = 0; i < CUE_FITS; i++)
+    tk->cue_refute_fit = 0;
+    for (int i = 0; i < CUE_FITS; i++) {
         tk->cue_fit_at[i] = whole_ticks(CUE_FIT_AT_S[i], T);
+        if (CUE_FIT_AT_S[i] < CUE_REFUTE_S)
+            tk->cue_refute_fit = i + 1;
+    }
     tk->level_release = LEVEL_RELEASE * T;
     tk->gain_step = GAIN_STEP * T;
     tk->gain_alpha = per_tick(GAIN_ALPHA, T);
@@ -1641,6 +1646,15 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
 
 static double line_fit(mar_follow *f, size_t ages, double *best_r, double *best_d, double *best_kappa);
 
+/* `ages` frames of music are one of the cue's fit times. */
+static int cue_fit_due(const mar_follow *f, size_t ages)
+{
+    for (int i = 0; i < CUE_FITS; i++)
+        if (f->tk.cue_fit_at[i] == ages)
+            return 1;
+    return 0;
+}
+
 /* WAITING at the cue: has the music started? Before it, the input is a
  * steady leader (hiss, a room, digital silence: frames within
  * STEADY_RANGE_DB of each other); the music is a frame RISE_DB over it, and
@@ -1665,6 +1679,15 @@ static int music_started(mar_follow *f, int have, uint64_t *onset)
     if (strength > NOTE_DB) {
         *onset = f->leader < f->tk.leader ? f->wait_start : f->rise_step ? f->rise_step : f->t;
         return 1;
+    }
+    if (heard < f->tk.leader_wait && cue_fit_due(f, (size_t)heard)) {
+        /* the music may have played from the first frame: it did, if the
+         * frames since fit the stored music from the cue */
+        double r, d, kappa;
+        if (line_fit(f, (size_t)heard, &r, &d, &kappa) >= CUE_LOCK) {
+            *onset = f->t + 1 - heard;
+            return 1;
+        }
     }
     if (f->leader < f->tk.leader) {                     /* the leader forming */
         double lo = f->leader ? fmin(f->lead_lo, db) : db, hi = f->leader ? fmax(f->lead_hi, db) : db;
@@ -1788,6 +1811,20 @@ static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
     return best;
 }
 
+/* A fit of the cue's is due after `ages` frames of music: counts it, and
+ * the fit times already gone with it (an onset placed in the past would
+ * otherwise bring fits on consecutive ticks, nearly the same frames, which
+ * would confirm each other). */
+static int cue_fit_now(mar_follow *f, size_t ages)
+{
+    if (ages < f->tk.cue_fit_at[f->cue_fits])
+        return 0;
+    do
+        f->cue_fits++;
+    while (f->cue_fits < CUE_FITS && ages >= f->tk.cue_fit_at[f->cue_fits]);
+    return 1;
+}
+
 /* After CUE_FIT_AT frames of music: the rate and offset on lines through
  * the cue that fit the live music best. Two clear fits in a row on the
  * same line lock; a sharp fit places the line; no fit reaching
@@ -1796,9 +1833,9 @@ static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
 static void cue_fit(mar_follow *f, uint32_t *flags)
 {
     size_t ages = (size_t)(f->t + 1 - f->cue_onset);
-    if (ages < f->tk.cue_fit_at[f->cue_fits])
+    int before = f->cue_fits;
+    if (!cue_fit_now(f, ages))
         return;
-    f->cue_fits++;
     double best_r, best_d, best_kappa;
     double best = line_fit(f, ages, &best_r, &best_d, &best_kappa);
     if (f->wait_start < f->cue_onset) {
@@ -1853,7 +1890,8 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         f->kf.p = line_now;
         f->kf.r = best_r;
         mar_kf_init(&f->kf, 1.0, 4.0 / ((double)ages * (double)ages));  /* a tick over the fit, twice [1] */
-    } else if (f->cue_fits == CUE_REFUTE_FIT + 1 && best < f->opt.track_threshold) {   /* NaN: flat, not refuted */
+    } else if (before <= f->tk.cue_refute_fit && f->cue_fits > f->tk.cue_refute_fit
+               && best < f->opt.track_threshold) {   /* NaN: flat, not refuted */
         f->cue_pending = 0;                                     /* refuted */
         f->state = MAR_FOLLOW_SEARCHING;
         f->doubt = f->probation = f->regaining = 0;
@@ -1897,9 +1935,8 @@ static void cue_refine(mar_follow *f)
         f->cue_refine = 0;      /* the tracker's window holds it all, or the music since is not one line */
         return;
     }
-    if (ages < f->tk.cue_fit_at[f->cue_fits])
+    if (!cue_fit_now(f, ages))
         return;
-    f->cue_fits++;
     double r, d, kappa;
     double fit = line_fit(f, ages, &r, &d, &kappa);
     if (!(fit >= f->opt.track_threshold) || !lockable_peak(f, fit, kappa))
@@ -2360,7 +2397,7 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         start_search(f, from);
         if (!f->regaining)
             f->regaining = 1, f->regain_ok = 0, f->regain_bad = f->bad_since;
-    } else if (f->probation || (f->cue_pending && f->cue_fits > CUE_REFUTE_FIT)) {
+    } else if (f->probation || (f->cue_pending && f->cue_fits > f->tk.cue_refute_fit)) {
         start_search(f, f->seg_start);      /* an unproven place: the search decides */
     } else if (ok && f->searching && !f->doubt && !f->regaining) {
         stop_search(f);
