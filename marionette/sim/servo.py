@@ -24,13 +24,14 @@ tick, averages past commands with non-negative weights).
 from that step on the setpoints, also those still inside the dead time,
 are ignored. The stop point is where the drive itself comes to rest
 braking at its acceleration limit from its position and its velocity over
-the last tick; the drive is steered along that braking profile by
-inverting its lag: the lag's input goes on as a staircase in the phase of
-the setpoints it replaces, each step the input that, held until the next,
-brings the drive onto the profile. The first step comes at once and is
-held only until the next one is due. Braking the input instead of the
-drive, as before, let the drive, lagging tau * v behind it, pass its own
-stop point by that much.
+the last tick. At every fine step the lag's step is inverted so that the
+drive lands on that braking profile plus its offset, at the same point of
+the tick before the brake, from the line the profile extends back: its
+wobble within a tick, from holding each setpoint. The measure compares
+positions a tick apart, so the kept wobble cancels from it and the
+measure sees the profile's own acceleration, at most the limit (where it
+reaches back before the brake, at most that or what the motion before
+had); once the profile has ended, the wobble fades out over FADE_TICKS.
 
 At a position limit the drive stops dead: the position is clipped and any
 velocity pointing out of the range is zeroed, at both limits alike.
@@ -48,6 +49,7 @@ import numpy as np
 from marionette.config import AxisConfig
 
 FINE_STEP = 0.001       # internal integration step [s]
+FADE_TICKS = 5          # quick stop: ticks over which the drive's wobble fades at rest
 
 
 class ServoModel:
@@ -84,13 +86,11 @@ class ServoModel:
         self.peak_accel = np.zeros(n)                                        # [unit/s^2]
         self._past = np.tile(x0, (2 * self.sample_steps + 1, 1))             # [unit]
         self._steps = 0                          # fine steps taken
-        self._brake_x = x0.copy()                # quick stop: the lag's input [unit]
-        self._brake_y = x0.copy()                # ... its profile: start [unit],
-        self._brake_v = np.zeros(n)              # ... velocity there [unit/s],
-        self._brake_age = np.zeros(n, dtype=int) # ... fine steps since its start
-        self._brake_next = np.zeros(n, dtype=int)   # fine steps until the input's next step
+        self._brake_y = x0.copy()                # quick stop: the profile's start [unit],
+        self._brake_v = np.zeros(n)              # ... its velocity there [unit/s],
+        self._brake_age = np.zeros(n, dtype=int) # ... fine steps since then,
+        self._brake_w = np.zeros((self.sample_steps, n))  # ... the wobble of the tick before [unit]
         self._input = x0.copy()                  # the lag's input in the last fine step [unit]
-        self._held = np.zeros(n, dtype=int)      # fine steps it has been held
 
     def reset_peak(self) -> None:
         """Forget the peak acceleration seen so far."""
@@ -114,48 +114,37 @@ class ServoModel:
         [unit/s], at the acceleration limit to rest, and hold there (until
         release())."""
         new = ~self.braking
-        T = self.sample_steps * self.step                                   # [s]
-        v = np.clip((self.position - self._back(self.sample_steps)) / T, -self.max_speed, self.max_speed)
-        # the input steps in the phase of the setpoints it replaces: a step
-        # in mid-tick would show in the drive's acceleration over a tick
-        self._brake_next[new] = (self.sample_steps - self._held % self.sample_steps)[new]
-        # the profile starts on the drive's motion as seen at those steps
-        # (its position at the last step, on at v), not on its wobble
-        # within the tick, which would show the same way
-        since = self.sample_steps - self._brake_next                        # [fine steps]
-        at_step = self._past[(self._steps - since) % self._past.shape[0], np.arange(len(self.axes))]
-        self._brake_y[new] = (at_step + v * since * self.step)[new]
+        per_tick = self.sample_steps
+        T = per_tick * self.step                                            # [s]
+        v = np.clip((self.position - self._back(per_tick)) / T, -self.max_speed, self.max_speed)
+        self._brake_y[new] = self.position[new]
         self._brake_v[new] = v[new]
         self._brake_age[new] = 0
+        # the last tick's positions off the line the profile extends back
+        # (row i: i + 1 fine steps into that tick)
+        back = np.arange(per_tick - 1, -1, -1)                              # [fine steps]
+        past = np.array([self._back(int(m)) for m in back])                 # [unit]
+        line = self.position - np.outer(back * self.step, v)                # [unit]
+        self._brake_w[:, new] = (past - line)[:, new]
         self.braking[:] = True
-        self._steer(new)
 
-    def _steer(self, due: np.ndarray) -> None:
-        """The next step of the quick stop's input for the drives due: the
-        input that, held until the step after, brings each onto its braking
-        profile, which ends at y + v|v| / (2 max_accel)."""
-        for j in np.flatnonzero(due):
-            n = int(self._brake_next[j])                                     # [fine steps]
-            y, v, a = self._brake_y[j], self._brake_v[j], self.max_accel[j]
-            t = min((self._brake_age[j] + n) * self.step, abs(v) / a)        # [s], braking ends
-            goal = min(max(y + v * t - np.sign(v) * a * t * t / 2, self.lower[j]), self.upper[j])
-            self._brake_x[j] = self._hold_input(j, goal, n)
-
-    def _hold_input(self, j: int, goal: float, n: int) -> float:
-        """The input [unit] that, held n fine steps, moves drive j from its
-        position to goal [unit]: the model's step inverted. Each step closes
-        alpha of the gap, at most vmax * step; a goal beyond n such steps
-        gets the input that runs the drive at top speed."""
-        y = self.position[j]
-        d, sign = abs(goal - y), (1.0 if goal >= y else -1.0)               # [unit]
-        top = self.max_speed[j] * self.step                                 # [unit] per step
-        keep = 1.0 - self._alpha[j]                                         # of an unclipped gap
-        clip = top / self._alpha[j]                                         # wider gaps move at top
-        for m in range(n):                  # m steps at top speed, then the lag's decay
-            gap = m * top + (d - m * top) / (1.0 - keep ** (n - m))
-            if gap - m * top <= clip:
-                return y + sign * gap
-        return y + sign * (clip + n * top)  # every step at top speed
+    def _brake_goal(self) -> np.ndarray:
+        """Where the quick stop puts each drive after this fine step [unit]:
+        its braking profile, which ends at y + v|v| / (2 max_accel), plus
+        its wobble at the same point of the tick before the brake (module
+        docstring)."""
+        T = self.sample_steps * self.step                                   # [s]
+        t = self._brake_age * self.step                                     # [s] since the brake
+        v, a = self._brake_v, self.max_accel
+        end = np.abs(v) / a                                                 # [s] braking ends
+        s = np.minimum(t, end)                                              # [s]
+        profile = np.clip(self._brake_y + v * s - np.sign(v) * a * s * s / 2, self.lower, self.upper)
+        # from a tick after the profile's end (the last comparisons with the
+        # braking done), the offset fades over FADE_TICKS (a half cosine)
+        fade = np.clip((t - end - T) / (FADE_TICKS * T), 0.0, 1.0)
+        phase = (self._brake_age - 1) % self.sample_steps                   # row of the tick before
+        wobble = self._brake_w[phase, np.arange(len(self.axes))]
+        return profile + wobble * (1 + np.cos(np.pi * fade)) / 2
 
     def release(self) -> None:
         """End a quick stop: hold the present position until new setpoints come."""
@@ -176,17 +165,18 @@ class ServoModel:
                 # a busy machine made its answers late)
                 rest = steps - done
                 self._head = (self._head + rest) % depth
-                self._held = self._held + rest
                 self._steps += rest
                 break
             self._head = (self._head + 1) % depth
             self._line[self._head] = self.command
             delayed = self._line[(self._head - self.delay_steps) % depth, cols]
             if self.braking.any():
+                # the lag's step inverted: the input that moves the drive
+                # onto the quick stop's goal in this step
                 self._brake_age += 1
-                self._brake_next -= 1
-                delayed = np.where(self.braking, self._brake_x, delayed)
-            self._held = np.where(delayed == self._input, self._held + 1, 1)
+                steer = self.position + (self._brake_goal() - self.position) / self._alpha
+                delayed = np.where(self.braking, steer, delayed)
+                self.command = np.where(self.braking, steer, self.command)
             self._input = delayed
             wanted = self._alpha * (delayed - self.position) / self.step     # [unit/s]
             wanted = np.clip(wanted, -self.max_speed, self.max_speed)
@@ -200,11 +190,6 @@ class ServoModel:
             out = ((self.position <= self.lower) & (self.velocity < 0)) | \
                   ((self.position >= self.upper) & (self.velocity > 0))
             self.velocity[out] = 0.0
-            if self.braking.any():
-                due = self.braking & (self._brake_next <= 0)
-                self._brake_next[due] = self.sample_steps
-                self._steer(due)
-            self.command = np.where(self.braking, self._brake_x, self.command)
             self._steps += 1
             self._past[self._steps % self._past.shape[0]] = self.position
             T = self.sample_steps * self.step                                # [s]
