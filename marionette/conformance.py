@@ -195,14 +195,23 @@ class Tester:
         on until the STATUS of that tick came too (at most LATE_TICKS more),
         so that a node or simulator answering late is judged by its answers,
         not by when they came."""
-        out, late = [], until + LATE_TICKS * TICK
+        out, late, status_late = [], until + LATE_TICKS * TICK, False
         while True:
             now = time.monotonic()
             waiting = status_of is not None and not any(
                 isinstance(m, P.Status) and self.same_tick(m.tick, status_of) for m in out)
             if now >= (late if waiting else until):
-                return out
+                break
             out += self.mine(self.link.receive((late if waiting else until) - now))
+            status_late = waiting and time.monotonic() > until
+        if status_late:
+            # the STATUS came late: the rest of its answer (a LOUDNESS after
+            # it, a frame of its own on CAN) is on its way behind it, and
+            # belongs to this tick, not to the next
+            rest = now + WAY
+            while (now := time.monotonic()) < rest:
+                out += self.mine(self.link.receive(rest - now))
+        return out
 
     def sync(self, setpoints: bool = True, poll: int = P.BROADCAST, extra=None) -> list:
         """One tick: SYNC, this node's setpoints (when streaming), then extra();
