@@ -19,6 +19,7 @@ from marionette.faults import rest_after
 from marionette.recorder import read_flight_record
 from marionette.transport.node_monitor import SILENT_AFTER_TICKS
 
+PRIORITY = 40               # SCHED_FIFO for play's tick, as a show runs (held off the CPU, it would be late itself)
 SIM_PRIORITY = 30
 KILL_AT = 2.5               # into the show [s]
 
@@ -29,7 +30,7 @@ def start_play(tmp_path, figure, link, seed, extra=()):
     show.save(path)
     flight = tmp_path / "flight.bin"
     proc = subprocess.Popen([sys.executable, "-m", "marionette.cli", "play", str(path), "--realtime",
-                             "--priority", "0", "--link", link, "--record", str(flight),
+                             "--priority", str(PRIORITY), "--link", link, "--record", str(flight),
                              *map(str, extra)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=tempfile.gettempdir())
