@@ -1646,13 +1646,21 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
 
 static double line_fit(mar_follow *f, size_t ages, double *best_r, double *best_d, double *best_kappa);
 
-/* `ages` frames of music are one of the cue's fit times. */
-static int cue_fit_due(const mar_follow *f, size_t ages)
+/* WAITING, `heard` frames since the first: is it time to ask whether the
+ * music played from the first frame? At the cue's fit times before
+ * LEADER_WAIT_S (music from the first frame, before a leader could form);
+ * once a steady start was taken for a leader, every LEADER_WAIT_S up to
+ * LEADER_CHECKS of them (the leader may be the music itself, a held chord). */
+static int first_frame_fit_due(const mar_follow *f, uint64_t heard)
 {
-    for (int i = 0; i < CUE_FITS; i++)
-        if (f->tk.cue_fit_at[i] == ages)
-            return 1;
-    return 0;
+    if (heard < f->tk.leader_wait) {
+        for (int i = 0; i < CUE_FITS; i++)
+            if (f->tk.cue_fit_at[i] == heard)
+                return 1;
+        return 0;
+    }
+    return f->leader >= f->tk.leader && heard % f->tk.leader_wait == 0
+        && heard <= LEADER_CHECKS * f->tk.leader_wait;
 }
 
 /* WAITING at the cue: has the music started? Before it, the input is a
@@ -1680,7 +1688,7 @@ static int music_started(mar_follow *f, int have, uint64_t *onset)
         *onset = f->leader < f->tk.leader ? f->wait_start : f->rise_step ? f->rise_step : f->t;
         return 1;
     }
-    if (heard < f->tk.leader_wait && cue_fit_due(f, (size_t)heard)) {
+    if (first_frame_fit_due(f, heard)) {
         /* the music may have played from the first frame: it did, if the
          * frames since fit the stored music from the cue */
         double r, d, kappa;
@@ -1699,15 +1707,6 @@ static int music_started(mar_follow *f, int have, uint64_t *onset)
             return 1;
         }
         return 0;
-    }
-    if (heard % f->tk.leader_wait == 0 && heard <= LEADER_CHECKS * f->tk.leader_wait) {
-        /* a steady start may be the music itself (a held chord): it is, if
-         * the frames since the first fit the stored music from the cue */
-        double r, d, kappa;
-        if (line_fit(f, (size_t)heard, &r, &d, &kappa) >= CUE_LOCK) {
-            *onset = f->t + 1 - heard;
-            return 1;
-        }
     }
     if (db <= f->lead_hi + RISE_START_DB) {             /* still the leader */
         f->rise_step = 0;
