@@ -67,8 +67,9 @@ def test_console_cost_in_a_terminal_on_a_shielded_cpu(tmux, tmp_path):  # noqa: 
     assert not (CPUSET_ROOT / REST).exists()
 
 
-def test_shield_without_cpu_is_refused():
-    r = subprocess.run([sys.executable, "-m", "marionette.cli", "bench", "console-cost", "--shield"],
+@pytest.mark.parametrize("bench", ["console-cost", "jitter"])
+def test_shield_without_cpu_is_refused(bench):
+    r = subprocess.run([sys.executable, "-m", "marionette.cli", "bench", bench, "--shield"],
                        capture_output=True, text=True)
-    assert r.returncode == 2
-    assert "Traceback" not in r.stderr
+    assert r.returncode == 2, r.stderr
+    assert "need" in r.stderr and "--cpu N" in r.stderr and "Traceback" not in r.stderr

@@ -72,10 +72,10 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    if not sys.stdout.isatty():
-        raise ArgumentError("bench console-cost: run it in a terminal (the console draws on stdout)")
     if (args.shield or args.share) and args.cpu is None:
         raise ArgumentError("bench console-cost: --shield and --share need --cpu N")
+    if not sys.stdout.isatty():
+        raise ArgumentError("bench console-cost: run it in a terminal (the console draws on stdout)")
     with shield(args.cpu) if args.shield else contextlib.nullcontext() as shielded:
         out = collect(args.segment, args.pairs, args.priority, args.cpu, args.share)
     out["shield"] = shielded

@@ -36,6 +36,7 @@ printed (and is in the JSON as "gil_p99_change_us").
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -50,11 +51,12 @@ import numpy as np
 
 from marionette.bench import STRICT_HELP, exit_status, verdict
 from marionette.bench._machine import describe, machine_info
+from marionette.bench.shield import shield
 from marionette.cli.options import Number
 from marionette.config import load_config
 from marionette.demo import DEMO_SHOW
 from marionette.engine import Engine
-from marionette.errors import MarionetteError
+from marionette.errors import ArgumentError, MarionetteError
 from marionette.show import load_show
 
 PRIORITY = 80             # SCHED_FIFO priority of the tick thread and of cyclictest [1..99]
@@ -264,7 +266,8 @@ def format_table(result: dict) -> str:
              f"SCHED_FIFO priority {result['priority']}, {result['seconds']:g} s "
              f"({result['ticks']} ticks) per run, memory "
              f"{'locked' if result['memory_locked'] else 'not locked'}, "
-             f"{'pinned to CPU %d' % result['cpu'] if result['cpu'] is not None else 'not pinned'}",
+             f"{'pinned to CPU %d' % result['cpu'] if result['cpu'] is not None else 'not pinned'}"
+             + (f", shielded ({result['shield']['moved']} tasks moved off)" if result.get("shield") else ""),
              describe(result["machine"]), "",
              f"{'run':<18} {'count':>6} {'p50_us':>8} {'p99_us':>8} {'p999_us':>8} {'max_us':>8} "
              f"{'overruns':>8}"]
@@ -311,6 +314,9 @@ def register(sub) -> None:
                         help="do not lock memory (engine lock_memory, cyclictest -m)")
     parser.add_argument("--cpu", type=Number(int, 0, (os.cpu_count() or 1) - 1), default=None, metavar="N",
                         help="pin the tick thread and cyclictest to CPU N (default: not pinned)")
+    parser.add_argument("--shield", action="store_true",
+                        help="with --cpu: move every other task of the machine off CPU N for the run "
+                             "(root, cpuset; marionette/bench/shield.py)")
     parser.add_argument("--cyclictest", default="cyclictest", metavar="PATH",
                         help="cyclictest executable (default: found on PATH)")
     parser.add_argument("--no-cyclictest", action="store_true", help="skip the cyclictest run")
@@ -321,9 +327,13 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    result = collect(args.seconds, args.priority, not args.no_mlock,
-                 None if args.no_cyclictest else args.cyclictest, cpu=args.cpu,
-                 rounds=max(1, args.rounds))
+    if args.shield and args.cpu is None:
+        raise ArgumentError("bench jitter: --shield needs --cpu N")
+    with shield(args.cpu) if args.shield else contextlib.nullcontext() as shielded:
+        result = collect(args.seconds, args.priority, not args.no_mlock,
+                         None if args.no_cyclictest else args.cyclictest, cpu=args.cpu,
+                         rounds=max(1, args.rounds))
+    result["shield"] = shielded
     if args.json:
         json.dump(result, sys.stdout, indent=2)
         sys.stdout.write("\n")
