@@ -2,10 +2,11 @@
 are in its module (marionette/bench/NAME.py: register, run, collect)."""
 from __future__ import annotations
 
-from marionette.bench import bands, console_cost, fuzz, jitter, led_sets, link, moves, shape, sync, tick
+from marionette.bench import bands, console_cost, fuzz, jitter, led_sets, link, misses, moves, shape, sync, tick
 
 BENCHES = {"tick": tick, "jitter": jitter, "moves": moves, "fuzz": fuzz, "link": link, "sync": sync,
-           "bands": bands, "led-sets": led_sets, "shape": shape, "console-cost": console_cost}
+           "bands": bands, "led-sets": led_sets, "shape": shape, "console-cost": console_cost,
+           "misses": misses}
 
 
 def register(sub) -> None:
