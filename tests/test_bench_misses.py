@@ -1,9 +1,8 @@
 """`marionette bench misses`: each missed tick put down to one cause, on made-up tracks and on the bench's decks."""
 import json
-import subprocess
-import sys
 
 import numpy as np
+from conftest import run_cli
 from marionette.bench import misses
 from marionette.sim.tape import Played
 
@@ -60,8 +59,7 @@ def test_each_missed_tick_has_one_cause():
 
 
 def test_bench_misses_quick_runs_the_follower_on_the_bench_decks():
-    r = subprocess.run([sys.executable, "-m", "marionette.cli", "bench", "misses", "--quick", "--seeds", "1",
-                        "--json"], capture_output=True, text=True, timeout=120)
+    r = run_cli("bench", "misses", "--quick", "--seeds", "1", "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert set(out["kinds"]) == {"pauses", "jump"}

@@ -49,7 +49,7 @@ def test_strict_means_the_same_in_every_bench():
     assert exit_status([False], strict=False) == 0
     from marionette.cli import build_parser
     bench = next(a for a in build_parser()._actions if a.dest == "command").choices["bench"]
-    with_targets = {"tick", "jitter", "moves", "fuzz", "sync", "shape"}
+    with_targets = {"tick", "jitter", "moves", "fuzz", "sync", "shape", "console-cost"}
     for name, parser in next(a for a in bench._actions if a.dest == "bench").choices.items():
         strict = [a for a in parser._actions if "--strict" in a.option_strings]
         assert bool(strict) == (name in with_targets), name

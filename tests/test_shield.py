@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from conftest import run_cli
 from marionette.bench.shield import CPUSET_ROOT, REST, shield
 from marionette.errors import ArgumentError
 
@@ -69,7 +70,6 @@ def test_console_cost_in_a_terminal_on_a_shielded_cpu(tmux, tmp_path):  # noqa: 
 
 @pytest.mark.parametrize("bench", ["console-cost", "jitter"])
 def test_shield_without_cpu_is_refused(bench):
-    r = subprocess.run([sys.executable, "-m", "marionette.cli", "bench", bench, "--shield"],
-                       capture_output=True, text=True)
+    r = run_cli("bench", bench, "--shield")
     assert r.returncode == 2, r.stderr
     assert "need" in r.stderr and "--cpu N" in r.stderr and "Traceback" not in r.stderr

@@ -113,20 +113,20 @@ def collect(segment: float, pairs: int, priority: int, cpu: int | None = None, s
             warnings.simplefilter("always", RuntimeWarning)
             report = engine.start(priority=priority, cpu=cpu)
         time.sleep(1.0)                                    # settle
-        lower, width, before, _ = engine.histogram("wake")
         for _ in range(pairs):
             for kind in ("without", "with"):
+                # the segment counts the ticks while the console draws, not its start and close
                 view = Console(engine, True, "console_cost") if kind == "with" else None
                 try:
+                    lower, width, before, _ = engine.histogram("wake")
                     time.sleep(segment)
+                    _, _, after, _ = engine.histogram("wake")
                 finally:
                     if view is not None:
                         view.close()
-                _, _, after, _ = engine.histogram("wake")
                 part = after.astype(np.int64) - before.astype(np.int64)
                 sums[kind] = part if sums[kind] is None else sums[kind] + part
                 segments.append((kind, round(quantile_us(lower, width, part, 0.99), 1)))
-                before = after
         stats = engine.stats()
     out = {"machine": machine, "segment_s": segment, "pairs": pairs, "fifo": bool(report["fifo"]),
            "priority": priority if report["fifo"] else 0, "cpu": cpu, "share": share,
