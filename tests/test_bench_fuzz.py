@@ -1,21 +1,13 @@
 """`marionette bench fuzz`: a short run's report, and its statistics."""
 import json
 import math
-import subprocess
-import sys
-import tempfile
 
 import pytest
 
+from conftest import run_cli
 from marionette.bench import fuzz
 
 FRAMES = 20000
-
-
-def run_cli(*args):
-    """The marionette command in its own process, outside the source tree."""
-    return subprocess.run([sys.executable, "-m", "marionette.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=120, cwd=tempfile.gettempdir())
 
 
 @pytest.fixture(scope="module")

@@ -113,14 +113,15 @@ def collect(segment: float, pairs: int, priority: int, cpu: int | None = None, s
             warnings.simplefilter("always", RuntimeWarning)
             report = engine.start(priority=priority, cpu=cpu)
         time.sleep(1.0)                                    # settle
+        lower, width, _, _ = engine.histogram("wake")      # bucket edges, the same on every call
         for _ in range(pairs):
             for kind in ("without", "with"):
                 # the segment counts the ticks while the console draws, not its start and close
                 view = Console(engine, True, "console_cost") if kind == "with" else None
                 try:
-                    lower, width, before, _ = engine.histogram("wake")
+                    before = engine.histogram("wake")[2]
                     time.sleep(segment)
-                    _, _, after, _ = engine.histogram("wake")
+                    after = engine.histogram("wake")[2]
                 finally:
                     if view is not None:
                         view.close()
