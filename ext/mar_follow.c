@@ -142,7 +142,6 @@
 #define ONSET_DB 1.5            /* resume: the music began at the first frame of the run this far over the silence [dB] */
 #define ONSET_SIGMAS 4.0        /* ... or this many of the silence's frame-to-frame deviations */
 #define RESUME_MIN_WINDOW_S 0.32  /* fewest live frames for a tracking measurement after a resume [s] */
-#define GAP_DB 3.0              /* stored music this far under the silence would not be heard [dB] */
 #define SPARSE_EVIDENCE 3       /* silent frames where music is expected ... */
 #define SPARSE_SPAN_S 1.0       /* ... spread over a hiss-flat stretch this long also mean a pause [s] */
 #define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */
@@ -168,7 +167,7 @@
 #define FIT_MIN_S 0.32          /* a line fit needs at least this much music [s] */
 #define RESUME_LOOK_S 0.5       /* a pause expects the music of this long after the stop [s] */
 #define ONSET_BACK_S 1.0        /* a resume looks this far back for the rise [s] */
-#define GAP_AHEAD_S 1.0         /* ... and this far ahead for a gap in the music [s] */
+#define GAP_AHEAD_S 1.0         /* ... and up to this far on, unheard in a gap of the music [s] */
 #define CLEAR_WINDOW_S 1.0      /* clear music: the live level over this long (half of it heard) [s] */
 static const double CUE_FIT_AT_S[CUE_FITS] = {      /* ... this much music [s]: from FIT_MIN_S every 0.1 s */
     0.32, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4,   /* while the rate is open, */
@@ -1494,10 +1493,15 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
         if (diff > -LOW_DB) {
             double step = fmax(-f->tk.gain_step, fmin(f->tk.gain_step, f->tk.gain_alpha * diff));
             f->gain += step;
-            /* the hiss is on the tape, before the knob: the floor moves with it */
-            for (int b = 0; b < FLOOR_BLOCKS; b++)
-                f->floor_min[b] += step;
-            f->nf += step;
+            /* the hiss is on the tape, before the knob: the floor moves up
+             * with it (a turn down shows in the quietest frames themselves,
+             * and a gain that sinks because the tape stopped unseen must not
+             * take the floor under the hiss, where no stop is heard) */
+            if (step > 0.0) {
+                for (int b = 0; b < FLOOR_BLOCKS; b++)
+                    f->floor_min[b] += step;
+                f->nf += step;
+            }
         }
         f->gain_slow += f->tk.gain_slow_alpha * (f->gain - f->gain_slow);
     }
@@ -2070,6 +2074,8 @@ static void near_search(mar_follow *f, uint32_t *flags)
     }
 }
 
+static void pause_now(mar_follow *f);
+
 /* While searching there is no place to expect music at, so a stop shows
  * only as a run of steady hiss near the noise floor. During SEARCH_GAP_S or
  * more such frames the search does not lock; when sound returns, it starts
@@ -2086,6 +2092,15 @@ static void search_gap(mar_follow *f)
         f->gap_lo = fmin(f->gap_lo, db);
         f->gap_hi = fmax(f->gap_hi, db);
         f->gap_run++;
+        /* lost, but the music was somewhere a moment ago: a tape that
+         * stands stops there, as in a pause seen while following (the
+         * flywheel would run on through the stop, seconds ahead by its end) */
+        if (f->gap_run == f->tk.search_gap && f->ever && f->state == MAR_FOLLOW_SEARCHING) {
+            f->silent_start = f->t + 1 - f->gap_run;
+            f->silent_lo = f->gap_lo;
+            f->silent_hi = f->gap_hi;
+            pause_now(f);
+        }
         return;
     }
     if (f->gap_run >= f->tk.search_gap && db > f->gap_hi + MIN_RESUME_DB) {
@@ -2225,6 +2240,45 @@ static void pause_now(mar_follow *f)
     stop_search(f);
 }
 
+/* Where the tape restarted, as the stored frame [stored ticks] that the
+ * onset frame (step `onset`) shows: the frozen place, or further on when
+ * the tape restarted in a gap of the music and ran on unheard. Each
+ * candidate puts the stored music along the line through it, at the rate,
+ * on the frames since the pause began: before the frozen place the tape
+ * stood (the silence's level), from it on the music plus the gain over the
+ * silence (powers added). The one with the least squared misfit [dB^2]
+ * wins (each frame's capped, as in stop_step), the middle of a flat
+ * stretch of them (music as quiet as the hiss: anywhere in it). */
+static double restart_place(const mar_follow *f, uint64_t onset)
+{
+    if (!f->have_gain)
+        return f->frozen;
+    double r = f->kf.r > 0.0 ? f->kf.r : 1.0;
+    double cap = LOW_DB * LOW_DB, hiss = pow(10.0, 0.1 * f->pause_db);
+    uint64_t back = (uint64_t)ceil((double)f->tk.gap_ahead / r) + 1;
+    uint64_t lo = onset > f->pause_start + back ? onset - back : f->pause_start;
+    long j = (long)floor(f->frozen);
+    double best = INFINITY;
+    long first = 0, last = 0;
+    for (long c = 0; c < (long)f->tk.gap_ahead; c++) {
+        double from = fmax(f->frozen, (double)(j + c)), cost = 0.0;
+        for (uint64_t q = lo; q <= f->t; q++) {
+            double db = f->ldb[ring(f, q)];
+            if (isnan(db))
+                continue;
+            double x = from + r * ((double)q - (double)onset), expected = f->pause_db;
+            if (x >= f->frozen)
+                expected = 10.0 * log10(pow(10.0, 0.1 * (stored_db_at(f, x) + f->gain)) + hiss);
+            cost += fmin(cap, (db - expected) * (db - expected));
+        }
+        if (cost < best - STOP_TIE_DB2)
+            best = cost, first = last = c;
+        else if (cost <= best + STOP_TIE_DB2 && last + 1 == c)
+            last = c;
+    }
+    return fmax(f->frozen, (double)(j + (first + last + 1) / 2));
+}
+
 /* In a pause: two frames clearly over the level of the silence resume the
  * tape where it stopped, from the middle of the first of them. */
 static int resume_now(mar_follow *f, int have, uint32_t *flags)
@@ -2260,21 +2314,7 @@ static int resume_now(mar_follow *f, int have, uint32_t *flags)
         onset--;
     }
     double run = (double)(f->t + 1 - onset);
-    /* if the tape restarted in a gap of the music (stored frames that would
-     * be buried under the silence), the onset heard is the first stored
-     * frame after the gap */
-    double from = f->frozen;
-    if (f->have_gain) {
-        long j = (long)floor(f->frozen);
-        for (long k = 0; k < (long)f->tk.gap_ahead; k++) {
-            double x = (double)(j + k);
-            if (stored_db_at(f, x) + f->gain >= f->pause_db - GAP_DB) {
-                if (x > from)
-                    from = x;
-                break;
-            }
-        }
-    }
+    double from = restart_place(f, onset);
     f->kf.p = from + f->kf.r * (run - 0.5);
     f->seg_start = onset;
     f->probation = 1;
