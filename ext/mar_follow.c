@@ -1493,15 +1493,10 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
         if (diff > -LOW_DB) {
             double step = fmax(-f->tk.gain_step, fmin(f->tk.gain_step, f->tk.gain_alpha * diff));
             f->gain += step;
-            /* the hiss is on the tape, before the knob: the floor moves up
-             * with it (a turn down shows in the quietest frames themselves,
-             * and a gain that sinks because the tape stopped unseen must not
-             * take the floor under the hiss, where no stop is heard) */
-            if (step > 0.0) {
-                for (int b = 0; b < FLOOR_BLOCKS; b++)
-                    f->floor_min[b] += step;
-                f->nf += step;
-            }
+            /* the hiss is on the tape, before the knob: the floor moves with it */
+            for (int b = 0; b < FLOOR_BLOCKS; b++)
+                f->floor_min[b] += step;
+            f->nf += step;
         }
         f->gain_slow += f->tk.gain_slow_alpha * (f->gain - f->gain_slow);
     }

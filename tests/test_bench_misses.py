@@ -4,6 +4,7 @@ import json
 import numpy as np
 from conftest import run_cli
 from marionette.bench import misses
+from marionette.bench import sync as bs
 from marionette.sim.tape import Played
 
 T = misses.T
@@ -65,3 +66,15 @@ def test_bench_misses_quick_runs_the_follower_on_the_bench_decks():
     assert set(out["kinds"]) == {"pauses", "jump"}
     assert out["total"]["ticks"] > 1000
     assert 0.5 < out["within50"] <= out["within50_without_masked"] <= 1.0
+
+
+def test_the_decks_are_bench_syncs_cued_top_decks():
+    """Every piece's decks, not only the first's: scenarios() draws for the
+    pieces in turn (a draw over one piece alone gave other decks)."""
+    durations = {"pop": 90.0, "waltz": 75.0, "ambient": 110.0, "techno": 160.0}      # [s]
+    for seed in (3, 20261125):
+        bench = bs.top_variants([sc for sc in bs.scenarios(durations, None, False, seed) if sc.target])
+        for style in durations:
+            got = misses.cued_top_decks(durations, style, seed)
+            assert [sc.deck for sc in got] == [sc.deck for sc in bench if sc.piece == style]
+            assert len(got) == 4 and all(sc.deck.start == 0.0 for sc in got)

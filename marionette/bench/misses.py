@@ -79,19 +79,26 @@ def causes(err, t, played, level_db, measured) -> dict:
     return out
 
 
+def cued_top_decks(durations: dict, style: str, seed: int, quick: bool = False) -> list:
+    """bench sync's cued top target decks of one piece; durations: every
+    piece's [s] (scenarios() draws for each piece in turn, so the decks of
+    one piece come only from the draw over all of them)."""
+    runs = bs.scenarios(durations, 20.0 if quick else None, quick, seed)
+    return bs.top_variants([sc for sc in runs if sc.target and sc.piece == style])
+
+
 def collect(seeds: int = bs.SEEDS, seed: int = bs.SEED, quick: bool = False, tracker: str = "smooth") -> dict:
     """Per deck kind (fast, slow-room, pauses, jump): the causes' tick counts, summed over the runs."""
     by_kind: dict[str, dict] = {}
-    for style, piece_seed in (bs.PIECES[:1] if quick else bs.PIECES):
-        piece = synthesize(style, seed=piece_seed)
+    pieces = {style: synthesize(style, seed=piece_seed) for style, piece_seed in bs.PIECES}
+    durations = {style: piece.duration for style, piece in pieces.items()}   # [s]
+    for style, piece in (list(pieces.items())[:1] if quick else pieces.items()):
         stored = loudness(piece.samples, piece.sample_rate)
         stored_onsets = onsets(piece.samples, piece.sample_rate)
         stored_bands = fit_frames(bands(piece.samples, piece.sample_rate), len(stored))
         audible = bs.audible_from(stored)
         for s in range(seed, seed + seeds):
-            decks = [sc for sc in bs.scenarios({style: piece.duration}, 20.0 if quick else None, quick, s)
-                     if sc.target]
-            for sc in bs.top_variants(decks):
+            for sc in cued_top_decks(durations, style, s, quick):
                 played = play(piece.samples, piece.sample_rate, sc.deck)
                 n = len(played.truth)
                 live = sync_ticks(loudness(played.samples, played.sample_rate))[:n]
