@@ -2153,6 +2153,38 @@ static void run_search(mar_follow *f, uint32_t *flags)
         lock_on(f, best, flags);
 }
 
+/* Music at music_db heard over hiss at hiss_db: the powers add [dB]. */
+static double over_hiss_db(double music_db, double hiss_db)
+{
+    return 10.0 * log10(pow(10.0, 0.1 * music_db) + pow(10.0, 0.1 * hiss_db));
+}
+
+/* A frame's squared misfit to the level expected [dB^2], capped so that
+ * one odd note does not decide. */
+static double misfit(double db, double expected)
+{
+    double d = db - expected;
+    return fmin(LOW_DB * LOW_DB, d * d);
+}
+
+/* The least of costs offered in order 0, 1, ... [dB^2]; those within
+ * STOP_TIE_DB2 of it right after it tie with it: flat_min_middle is the
+ * middle of that flat stretch. */
+typedef struct {
+    double best;
+    size_t first, last;
+} flat_min;
+
+static void flat_min_offer(flat_min *m, size_t i, double cost)
+{
+    if (cost < m->best - STOP_TIE_DB2)
+        m->best = cost, m->first = m->last = i;
+    else if (cost <= m->best + STOP_TIE_DB2 && m->last + 1 == i)
+        m->last = i;
+}
+
+static size_t flat_min_middle(const flat_min *m) { return (m->first + m->last + 1) / 2; }
+
 /* Where the tape stopped: the step of the first silent frame. It lies after
  * the last frame clearly over the silence heard now (quiet music may stand
  * only a few dB over the hiss) and no later than the silent run's start.
@@ -2179,30 +2211,22 @@ static uint64_t stop_step(const mar_follow *f, uint64_t oldest)
     size_t n = (size_t)(hi_step - lo_step + 1);
     /* splits s in [lo_step, hi_step]; frames after hi_step are silence for all of them */
     double music_sum[STOP_SPAN + 1], silence_sum[STOP_SPAN + 1];
-    double cap = LOW_DB * LOW_DB;
     music_sum[0] = silence_sum[0] = 0.0;
     for (size_t i = 0; i < n; i++) {
         uint64_t q = lo_step + i;
         double db = f->ldb[ring(f, q)], m = 0.0, h = 0.0;
         if (!isnan(db)) {
             double music = stored_db_at(f, f->lpos[ring(f, q)] - 0.5 * f->kf.r - 0.5) + f->gain;
-            double expected = 10.0 * log10(pow(10.0, 0.1 * music) + pow(10.0, 0.1 * hiss));
-            m = fmin(cap, (db - expected) * (db - expected));
-            h = fmin(cap, (db - hiss) * (db - hiss));
+            m = misfit(db, over_hiss_db(music, hiss));
+            h = misfit(db, hiss);
         }
         music_sum[i + 1] = music_sum[i] + m;
         silence_sum[i + 1] = silence_sum[i] + h;
     }
-    double best = INFINITY;
-    size_t first = 0, last = 0;                       /* the best flat stretch of splits */
-    for (size_t i = 0; i < n; i++) {
-        double cost = music_sum[i] + silence_sum[n] - silence_sum[i];
-        if (cost < best - STOP_TIE_DB2)
-            best = cost, first = last = i;
-        else if (cost <= best + STOP_TIE_DB2 && last + 1 == i)
-            last = i;
-    }
-    return lo_step + (first + last + 1) / 2;
+    flat_min split = {INFINITY, 0, 0};
+    for (size_t i = 0; i < n; i++)
+        flat_min_offer(&split, i, music_sum[i] + silence_sum[n] - silence_sum[i]);
+    return lo_step + flat_min_middle(&split);
 }
 
 /* The recorder stopped: back to where it stopped, and hold there. */
@@ -2249,29 +2273,23 @@ static double restart_place(const mar_follow *f, uint64_t onset)
     if (!f->have_gain)
         return f->frozen;
     double r = f->kf.r > 0.0 ? f->kf.r : 1.0;
-    double cap = LOW_DB * LOW_DB, hiss = pow(10.0, 0.1 * f->pause_db);
     uint64_t back = (uint64_t)ceil((double)f->tk.gap_ahead / r) + 1;
     uint64_t lo = onset > f->pause_start + back ? onset - back : f->pause_start;
-    long j = (long)floor(f->frozen);
-    double best = INFINITY;
-    long first = 0, last = 0;
-    for (long c = 0; c < (long)f->tk.gap_ahead; c++) {
-        double from = fmax(f->frozen, (double)(j + c)), cost = 0.0;
+    double j = floor(f->frozen);
+    flat_min place = {INFINITY, 0, 0};
+    for (size_t c = 0; c < f->tk.gap_ahead; c++) {
+        double from = fmax(f->frozen, j + (double)c), cost = 0.0;
         for (uint64_t q = lo; q <= f->t; q++) {
             double db = f->ldb[ring(f, q)];
             if (isnan(db))
                 continue;
-            double x = from + r * ((double)q - (double)onset), expected = f->pause_db;
-            if (x >= f->frozen)
-                expected = 10.0 * log10(pow(10.0, 0.1 * (stored_db_at(f, x) + f->gain)) + hiss);
-            cost += fmin(cap, (db - expected) * (db - expected));
+            double x = from + r * ((double)q - (double)onset);
+            cost += misfit(db, x >= f->frozen ? over_hiss_db(stored_db_at(f, x) + f->gain, f->pause_db)
+                                              : f->pause_db);
         }
-        if (cost < best - STOP_TIE_DB2)
-            best = cost, first = last = c;
-        else if (cost <= best + STOP_TIE_DB2 && last + 1 == c)
-            last = c;
+        flat_min_offer(&place, c, cost);
     }
-    return fmax(f->frozen, (double)(j + (first + last + 1) / 2));
+    return fmax(f->frozen, j + (double)flat_min_middle(&place));
 }
 
 /* In a pause: two frames clearly over the level of the silence resume the

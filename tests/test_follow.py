@@ -21,7 +21,6 @@ import pytest
 
 from marionette.config import FollowConfig, config_from_dict
 from marionette.errors import ConfigError
-from marionette.music.bands import bands, fit_frames
 from marionette.music.feature import loudness, mono, onsets, read_wav
 from marionette.music.follower import (FLAGS, OPTIONS, STATES, FollowError, Follower, c_options,
                                        options_markdown, sync_ticks)
@@ -342,44 +341,6 @@ def test_a_stop_soon_after_a_volume_turn_is_caught(piece, stored):
                        and np.all(np.abs(err[t >= stop + pause + 1.5]) <= 0.05))
     assert valid >= 12
     assert caught >= valid - 2                                # before: 7 of 15
-
-def test_a_stop_under_the_hiss_is_not_flown_through():
-    """The volume is turned 20 dB down (the music then stands at the 20 dB
-    SNR hiss) and 2.5-4 s later the tape stops for 6-10 s: a stop that the
-    level may not show until the music expected rises again. By the stop's
-    last 2 s the place is held within 0.25 s of where the tape stopped, and
-    mostly back within 50 ms from 1 s after the restart. Twenty random decks
-    (five per style) as a show follows them: cued at the top, with bands and
-    onsets. Before the noise floor stopped sinking with the volume estimate,
-    two of them flew through the stop (6.8 and 9.2 s ahead at its end)."""
-    rng = np.random.default_rng(5)
-    held, back, valid = [], 0, 0
-    for _, piece, stored, stored_onsets in taught_with_onsets(*FOUR_STYLES):
-        stored_bands = fit_frames(bands(piece.samples, piece.sample_rate), len(stored))
-        for case in range(5):
-            turn = float(rng.uniform(10.0, 20.0))                                 # [s]
-            stop, length = turn + float(rng.uniform(2.5, 4.0)), float(rng.uniform(6.0, 10.0))    # [s]
-            deck = Deck(speed=float(rng.uniform(0.95, 1.06)), wow=0.001, wow_hz=0.9, snr_db=20.0,
-                        sample_rate=11025, gain_db=((0.0, 0.0), (turn, 0.0), (turn + 2.0, -20.0)),
-                        pauses=((stop, length),), seconds=stop + length + 8.0, seed=int(rng.integers(1000)))
-            played = play(piece.samples, piece.sample_rate, deck)
-            n = len(played.truth)
-            live = sync_ticks(loudness(played.samples, played.sample_rate))[:n]
-            live_bands = sync_ticks(fit_frames(bands(played.samples, played.sample_rate), len(live) - 1))
-            f = Follower(stored, onset=stored_onsets, bands=stored_bands)
-            f.cue(0.0)
-            track = f.run(live, sync_ticks(onsets(played.samples, played.sample_rate))[:n], bands=live_bands)
-            err = np.abs(track.position[:n] * T - played.truth[:len(track.position)])
-            t = np.arange(len(err)) * T
-            if err[int((turn - 0.1) / T)] > 0.05:
-                continue                                      # not on the place before the turn
-            valid += 1
-            held.append(np.max(err[(t > stop + length - 2.0) & (t < stop + length)]))
-            back += np.mean(err[t >= stop + length + 1.0] <= 0.05) >= 0.95
-    assert valid >= 16
-    assert max(held) <= 0.25, np.round(held, 2)
-    assert back >= valid - 5                                  # before: 14 of 20
-
 
 @pytest.mark.xfail(strict=True, reason="known limit (docs/music.md): since the follower is "
                    "stepped per tick as in the engine (no step at tick 0), deck 6 locks on the "
