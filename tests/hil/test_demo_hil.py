@@ -43,9 +43,13 @@ def test_demo_headless_runs_and_stops_the_simulator():
 
 def _demo(*args, tmp=None):
     env = dict(os.environ, TMPDIR=str(tmp)) if tmp is not None else None   # its taught show
+    # Ctrl-C as in a shell's foreground job: a test run started in the
+    # background (nohup, &) hands its children SIGINT ignored, and Python
+    # then raises no KeyboardInterrupt before the show's view takes SIGINT
     return subprocess.Popen([sys.executable, "-m", "marionette.cli", "demo", *map(str, args)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            cwd=tempfile.gettempdir(), env=env)
+                            cwd=tempfile.gettempdir(), env=env,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
 def _sim_pid(proc) -> int:
