@@ -189,7 +189,8 @@ static const double CUE_FIT_AT_S[CUE_FITS] = {      /* ... this much music [s]: 
 #define MODEL_LOCK_RATE_VAR 9e-4 /* model: the rate's variance when a candidate is taken: a lock on a short
                                   * window knows the rate to a few % [1] */
 #define CUE_LOCK 0.8            /* a fit this good, and sharp, locks the cue [1] ... */
-#define CUE_PRIOR 0.5           /* ... if it leads every other place by this times a search lock's lead [1] */
+#define CUE_PRIOR 0.5           /* ... if it leads every other place by this times a search lock's lead,
+                                 * over the square root of the bands [1] */
 
 typedef struct {
     double p;                   /* position at step t [stored ticks] */
@@ -1809,6 +1810,15 @@ static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
     return best;
 }
 
+/* The lead in Fisher z a cue's line needs over any other place, from a
+ * window of `frames` live frames: a share of a search lock's (the cue is
+ * the operator's word), shrinking as 1/sqrt(bands) as lock_lead does with
+ * the frames (b bands hold b times the independent values of one). */
+static double cue_lead(const mar_follow *f, size_t frames)
+{
+    return CUE_PRIOR * lock_lead(f, frames) / sqrt((double)f->main->bands);
+}
+
 /* A fit of the cue's is due after `ages` frames of music: counts it, and
  * the fit times already gone with it (an onset placed in the past would
  * otherwise bring fits on consecutive ticks, nearly the same frames, which
@@ -1857,7 +1867,7 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
     double lead = fisher(best) - fisher(rival);
     if (best >= f->opt.track_threshold)
         onset_line(f, ages, &best_r, &best_d);
-    int clear = best >= CUE_LOCK && sharp && lead >= CUE_PRIOR * lock_lead(f, ages);
+    int clear = best >= CUE_LOCK && sharp && lead >= cue_lead(f, ages);
     double line_now = f->cue_from + best_r * ((double)ages - 0.5) + best_d;     /* [stored ticks] */
     /* two clear fits in a row on the same line, as a search lock is confirmed */
     int confirmed = clear && fabs(line_now - (f->cue_prev + best_r * (double)(f->t - f->cue_prev_t))) <= 1.0;
@@ -1949,7 +1959,7 @@ static void cue_refine(mar_follow *f)
     double apart_now = line_now - f->kf.p, apart_onset = apart_now - (r - f->kf.r) * (double)ages;
     double lead = fisher(line_score(f, ch, line_now, r, ages))
                 - fisher(line_score(f, ch, f->kf.p, f->kf.r, ages));
-    if (fmax(fabs(apart_now), fabs(apart_onset)) > 1.0 && lead >= CUE_PRIOR * lock_lead(f, ages)) {
+    if (fmax(fabs(apart_now), fabs(apart_onset)) > 1.0 && lead >= cue_lead(f, ages)) {
         f->kf.p = line_now;
         f->kf.r = r;
         double rate_sd = 1.0 / (double)ages;                    /* a tick over the fit [1] */
