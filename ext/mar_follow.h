@@ -85,7 +85,7 @@ enum mar_follow_state {
     X(window, double, 4.0, 0.08, 160.0, "s", "tracking correlation window")                         \
     X(min_window, double, 0.8, 0.08, 160.0, "s", "fewest live frames for a tracking measurement")   \
     X(verify_window, double, 5.0, 0.08, 160.0, "s", "window that verifies a search candidate")      \
-    X(lock_window, double, 2.0, 0.08, 160.0, "s", "fewest consistent live frames behind a lock")    \
+    X(lock_window, double, 1.0, 0.08, 160.0, "s", "fewest consistent live frames behind a lock")    \
     X(paper_window, double, 0.5, 0.08, 160.0, "s", "paper mode correlation window")                 \
     X(search_block, double, 0.08, 0.02, 1.28, "s", "the search averages the music over blocks this long") \
     X(search_window, double, 2.56, 0.24, 160.0, "s", "live music the search scores a place on")     \
