@@ -59,7 +59,10 @@
  * over the noise floor (the quietest live frame of the last 20 s, moved
  * with the live-minus-stored level, as the hiss on the tape turns with the
  * volume knob), frames far below that, near the floor (or very far below)
- * and steady like hiss, for pause_after ticks: the recorder stopped. This
+ * and steady like hiss, for pause_after ticks: the recorder stopped. A
+ * stop the gain estimate cannot show (it lags a knob turned just before
+ * or during it) is the level falling onto a line that stands still for
+ * 0.5 s while the music expected there moves (stands_still). This
  * runs while the place is LOCKED or HOLDING on the flywheel (a quiet
  * passage or a volume turn can make the tracking unclear just before a
  * stop), not in doubt (below). The position goes back to where the silence
@@ -144,6 +147,13 @@
 #define RESUME_MIN_WINDOW_S 0.32  /* fewest live frames for a tracking measurement after a resume [s] */
 #define SPARSE_EVIDENCE 3       /* silent frames where music is expected ... */
 #define SPARSE_SPAN_S 1.0       /* ... spread over a hiss-flat stretch this long also mean a pause [s] */
+#define STILL_S 0.5             /* the live level this long within STEADY_RANGE_DB of a line (hiss, the knob
+                                 * turning or not) ... [s] */
+#define MOVING_DB 12.0          /* ... where the music expected strays this much from one is a pause [dB] */
+#define STILL_LOOK_S 2.0        /* ... looked for over this long since a fall of the level ... [s] */
+#define DROP_DB 10.0            /* ... by this much ... [dB] */
+#define DROP_FRAMES 3           /* ... within this many frames (a room's tail) [1] */
+#define STILL_MAX 512           /* most frames in STILL_LOOK_S [1] */
 #define RESUME_SIGMAS 5.0       /* a frame this many of the silence's deviations over it is music again */
 #define NEAR_S 5.0              /* the near search gives up this long after the restart [s] */
 #define NEAR_SEP 4              /* a rival peak of the near search lies at least this far away [ticks] */
@@ -241,7 +251,7 @@ typedef struct {
     double meas_noise;          /* [stored ticks] */
     double rate_var;            /* the rate's variance growth per tick [1] */
     /* the algorithm's own times and rates (the #defines above) per tick */
-    uint64_t floor_block, sparse_span, regain, probation_bad, near, patient_after, long_verify,
+    uint64_t floor_block, sparse_span, still_after, still_look, regain, probation_bad, near, patient_after, long_verify,
         long_hold, search_gap, leader, leader_wait;     /* [ticks] */
     size_t resume_min_window, fit_min, resume_look, onset_back, gap_ahead, clear_window;  /* [ticks] */
     size_t cue_fit_at[CUE_FITS];  /* [ticks] */
@@ -446,6 +456,10 @@ static int tick_options_of(const mar_follow_options *o, tick_options *tk, const 
     tk->rate_var = o->rate_walk * T;
     tk->floor_block = whole_ticks(FLOOR_BLOCK_S, T);
     tk->sparse_span = whole_ticks(SPARSE_SPAN_S, T);
+    tk->still_after = whole_ticks(STILL_S, T);
+    tk->still_look = whole_ticks(STILL_LOOK_S, T);
+    if (tk->still_look > STILL_MAX)
+        tk->still_look = STILL_MAX;
     tk->regain = whole_ticks(REGAIN_S, T);
     tk->probation_bad = whole_ticks(PROBATION_BAD_S, T);
     tk->near = whole_ticks(NEAR_S, T);
@@ -669,6 +683,8 @@ mar_follow *mar_follow_create_music(const mar_follow_options *opt, const mar_fol
     size_t search_span = (size_t)((double)(tk.search_window + 2) * (double)tk.search_block / opt->rate_min) + 2;
     if (search_span > longest)
         longest = search_span;
+    if (tk.still_look + DROP_FRAMES > longest)
+        longest = tk.still_look + DROP_FRAMES;             /* stands_still looks back this far */
     f->hcap = 64;
     while (f->hcap < longest + 64)
         f->hcap <<= 1;
@@ -1413,13 +1429,107 @@ static int knob_turning(const mar_follow *f)
     return f->have_gain && fabs(f->gain - f->gain_slow) > TURNING_DB;
 }
 
+/* Music at music_db heard over hiss at hiss_db: the powers add [dB]. */
+static double over_hiss_db(double music_db, double hiss_db)
+{
+    return 10.0 * log10(pow(10.0, 0.1 * music_db) + pow(10.0, 0.1 * hiss_db));
+}
+
+/* Least squares line through y[0 .. n) at x = 0 .. n - 1: the largest
+ * and least residual from it [same unit as y]. */
+static void line_residuals(const double *y, size_t n, double *lo, double *hi)
+{
+    double mx = 0.5 * (double)(n - 1), my = 0.0, sxy = 0.0, sxx = 0.0;
+    for (size_t i = 0; i < n; i++)
+        my += y[i];
+    my /= (double)n;
+    for (size_t i = 0; i < n; i++)
+        sxy += ((double)i - mx) * (y[i] - my), sxx += ((double)i - mx) * ((double)i - mx);
+    double slope = sxx > 0.0 ? sxy / sxx : 0.0;
+    *lo = INFINITY, *hi = -INFINITY;
+    for (size_t i = 0; i < n; i++) {
+        double res = y[i] - my - slope * ((double)i - mx);
+        *lo = fmin(*lo, res), *hi = fmax(*hi, res);
+    }
+}
+
+/* The step of the latest fall of the live level by DROP_DB within
+ * DROP_FRAMES frames, at most `back` steps ago, no earlier than `oldest`;
+ * 0 if none. */
+static uint64_t last_drop(const mar_follow *f, uint64_t back, uint64_t oldest)
+{
+    uint64_t from = f->t + 1 > back ? f->t + 1 - back : 0;
+    if (from < oldest + DROP_FRAMES)
+        from = oldest + DROP_FRAMES;
+    for (uint64_t q = f->t; q >= from && q > 0; q--) {
+        double db = f->ldb[ring(f, q)], peak = -INFINITY;
+        for (uint64_t k = 1; k <= DROP_FRAMES; k++)
+            peak = fmax(peak, f->ldb[ring(f, q - k)]);           /* NaN (no frame) ignored */
+        if (!isnan(db) && peak - db >= DROP_DB)
+            return q;
+    }
+    return 0;
+}
+
+/* A stop that the level alone cannot show, the gain estimate lagging a
+ * knob turned just before or during it (the hiss then stands where the
+ * music is expected): since its latest fall (the tape halting), for at
+ * least STILL_S, the live level lies within STEADY_RANGE_DB of a line (hiss,
+ * under a knob that may be turning) and steps less than STEADY_DB a frame,
+ * while the stored music along the line, heard over the tape's hiss
+ * (powers added), strays MOVING_DB from a line of its own. Hiss stands
+ * still; music does not where it moves; and sustained music (a pad, a
+ * room's tail) does not fall onto a flat level. The knob moves hiss and
+ * music alike, so no gain is needed beyond the tape's hiss in stored terms
+ * (floor minus gain, which move together). On a stop the frames since
+ * the fall are the silent run that dates it, and the hiss sets the gain. */
+static int stands_still(mar_follow *f)
+{
+    uint64_t drop = last_drop(f, f->tk.still_look, f->seg_start);
+    if (!drop || f->t + 1 - drop < f->tk.still_after)
+        return 0;
+    size_t n = (size_t)(f->t + 1 - drop);
+    double live[STILL_MAX], music[STILL_MAX], hiss = f->nf - f->gain;    /* [dB] */
+    for (size_t i = 0; i < n; i++) {
+        uint64_t q = drop + i;
+        live[i] = f->ldb[ring(f, q)];
+        if (isnan(live[i]) || (i && fabs(live[i] - live[i - 1]) > STEADY_DB))
+            return 0;
+        double p = q == f->t ? f->kf.p : f->lpos[ring(f, q)];
+        music[i] = over_hiss_db(stored_db_at(f, p - 0.5 * f->kf.r - 0.5), hiss);
+    }
+    double lo, hi, mlo, mhi;
+    line_residuals(live, n, &lo, &hi);
+    if (hi - lo > STEADY_RANGE_DB)
+        return 0;
+    line_residuals(music, n, &mlo, &mhi);
+    if (mhi - mlo < MOVING_DB)
+        return 0;
+    f->silent_run = n;
+    f->silent_start = drop;
+    f->silent_lo = f->silent_hi = live[n - 1];
+    for (size_t i = 0; i < n; i++)
+        f->silent_lo = fmin(f->silent_lo, live[i]), f->silent_hi = fmax(f->silent_hi, live[i]);
+    /* the hiss heard alone shows the knob: the gain is the hiss's quietest
+     * frame now (as the floor is the quietest frame heard) over the tape's hiss */
+    double step = live[n - 1] - 0.5 * (hi - lo) - hiss - f->gain;        /* [dB] */
+    f->gain += step, f->gain_slow += step, f->nf += step;
+    for (int b = 0; b < FLOOR_BLOCKS; b++)
+        f->floor_min[b] += step;
+    return 1;
+}
+
 /* Pause detection while following; returns 1 when the recorder stopped.
  * Evidence only where the stored music says the live frame should stand
  * clearly over the noise floor; there a frame is "low" if far below what
  * is expected and "silent" if also near the floor. */
 static int detect_pause(mar_follow *f, int have)
 {
-    if (!have || !f->have_gain || !f->measured || (f->doubt && !knob_turning(f)))
+    if (!have || !f->have_gain || !f->measured)
+        return 0;
+    if (stands_still(f))
+        return 1;                                     /* evidence even in doubt: music moves anywhere near */
+    if (f->doubt && !knob_turning(f))
         return 0;                                     /* only when the position is trusted */
     double db = f->ldb[ring(f, f->t)];
     /* the stored frame this live frame should show: centre of the frame */
@@ -2161,12 +2271,6 @@ static void run_search(mar_follow *f, uint32_t *flags)
     cand *best = f->gap_run >= f->tk.search_gap ? NULL : lock_choice(f);
     if (best)
         lock_on(f, best, flags);
-}
-
-/* Music at music_db heard over hiss at hiss_db: the powers add [dB]. */
-static double over_hiss_db(double music_db, double hiss_db)
-{
-    return 10.0 * log10(pow(10.0, 0.1 * music_db) + pow(10.0, 0.1 * hiss_db));
 }
 
 /* A frame's squared misfit to the level expected [dB^2], capped so that

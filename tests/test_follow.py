@@ -63,6 +63,16 @@ def first_lock(track, err, after=0.0, within=0.05):
     return t[idx[0]] if len(idx) else math.inf
 
 
+def stop_caught(track, err, stop, pause, held_from):
+    """A stop at live time stop [s] lasting pause [s] was caught: PAUSED and
+    held within 0.1 s of the truth from held_from [s] into it to its end,
+    and within 50 ms again from 1.5 s after the restart on."""
+    t = np.arange(len(err)) * T
+    held = (t > stop + held_from) & (t < stop + pause)
+    return bool(np.all(track.state[held] == PAUSED) and np.all(np.abs(err[held]) <= 0.1)
+                and np.all(np.abs(err[t >= stop + pause + 1.5]) <= 0.05))
+
+
 def lock_entries(track):
     """Ticks at which the follower entered LOCKED (from any other state)."""
     before = np.concatenate([[-1], track.state[:-1]])
@@ -332,15 +342,41 @@ def test_a_stop_soon_after_a_volume_turn_is_caught(piece, stored):
         deck = Deck(speed=rng.uniform(0.96, 1.04), snr_db=20.0, start=start, gain_db=gain,
                     pauses=((stop, pause),), seconds=stop + pause + 6.0, seed=seed)
         track, _, err, _ = live_track(piece, stored, deck)
-        t = np.arange(len(err)) * T
         if abs(err[int((stop - 0.1) / T)]) > 0.05:
             continue
         valid += 1
-        held = (t > stop + 0.5) & (t < stop + pause)
-        caught += bool(np.all(track.state[held] == PAUSED) and np.all(np.abs(err[held]) <= 0.1)
-                       and np.all(np.abs(err[t >= stop + pause + 1.5]) <= 0.05))
+        caught += stop_caught(track, err, stop, pause, held_from=0.5)
     assert valid >= 12
     assert caught >= valid - 2                                # before: 7 of 15
+
+
+def test_a_stop_during_a_volume_turn_is_caught():
+    """The volume is turned 20-30 dB up over 2-3 s and the tape stops
+    during the turn or within a second of its end, for 3-6 s (pop, techno
+    and waltz decks at 11 kHz, 20 dB SNR, known start). The gain estimate
+    lags the knob, so the hiss of the stop stands about where the music is
+    expected; the stop shows as a fall onto a level that stands still
+    while the music expected moves (stands_still in ext/mar_follow.c).
+    Held within 0.1 s from 1 s into the stop, within 50 ms again from
+    1.5 s after the restart. Eighteen random decks; the few where the
+    follower was not on the place before the turn do not count."""
+    rng = np.random.default_rng(21)
+    valid = caught = 0
+    for seed in range(18):
+        style, piece_seed = (("pop", 1), ("techno", 4), ("waltz", 2))[seed % 3]
+        start, turn = rng.uniform(5.0, 50.0), rng.uniform(8.0, 12.0)              # [s]
+        up, span = rng.uniform(20.0, 30.0), rng.uniform(2.0, 3.0)                 # [dB], [s]
+        stop, pause = turn + rng.uniform(0.0, span + 1.0), rng.uniform(3.0, 6.0)  # [s]
+        deck = Deck(speed=rng.uniform(0.96, 1.04), snr_db=20.0, start=start, sample_rate=11025,
+                    gain_db=((0.0, 0.0), (turn, 0.0), (turn + span, up)),
+                    pauses=((stop, pause),), seconds=stop + pause + 6.0, seed=seed)
+        track, _, err, _ = live_track(*taught(style, piece_seed), deck, start=start / T)
+        if abs(err[int((turn - 0.1) / T)]) > 0.05:
+            continue
+        valid += 1
+        caught += stop_caught(track, err, stop, pause, held_from=1.0)
+    assert valid >= 15
+    assert caught >= 12                                       # before stands_still: 6 of 18
 
 @pytest.mark.xfail(strict=True, reason="known limit (docs/music.md): since the follower is "
                    "stepped per tick as in the engine (no step at tick 0), deck 6 locks on the "
