@@ -1429,6 +1429,16 @@ static int knob_turning(const mar_follow *f)
     return f->have_gain && fabs(f->gain - f->gain_slow) > TURNING_DB;
 }
 
+/* The volume moved by step [dB]: the gain, and the noise floor with it
+ * (the hiss is on the tape, before the knob). */
+static void move_gain(mar_follow *f, double step)
+{
+    f->gain += step;
+    for (int b = 0; b < FLOOR_BLOCKS; b++)
+        f->floor_min[b] += step;
+    f->nf += step;
+}
+
 /* Music at music_db heard over hiss at hiss_db: the powers add [dB]. */
 static double over_hiss_db(double music_db, double hiss_db)
 {
@@ -1461,7 +1471,7 @@ static uint64_t last_drop(const mar_follow *f, uint64_t back, uint64_t oldest)
     uint64_t from = f->t + 1 > back ? f->t + 1 - back : 0;
     if (from < oldest + DROP_FRAMES)
         from = oldest + DROP_FRAMES;
-    for (uint64_t q = f->t; q >= from && q > 0; q--) {
+    for (uint64_t q = f->t; q >= from; q--) {
         double db = f->ldb[ring(f, q)], peak = -INFINITY;
         for (uint64_t k = 1; k <= DROP_FRAMES; k++)
             peak = fmax(peak, f->ldb[ring(f, q - k)]);           /* NaN (no frame) ignored */
@@ -1513,9 +1523,8 @@ static int stands_still(mar_follow *f)
     /* the hiss heard alone shows the knob: the gain is the hiss's quietest
      * frame now (as the floor is the quietest frame heard) over the tape's hiss */
     double step = live[n - 1] - 0.5 * (hi - lo) - hiss - f->gain;        /* [dB] */
-    f->gain += step, f->gain_slow += step, f->nf += step;
-    for (int b = 0; b < FLOOR_BLOCKS; b++)
-        f->floor_min[b] += step;
+    move_gain(f, step);
+    f->gain_slow += step;                            /* a reading, not a turn */
     return 1;
 }
 
@@ -1603,11 +1612,7 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
         double diff = sum / (double)cnt - f->gain;
         if (diff > -LOW_DB) {
             double step = fmax(-f->tk.gain_step, fmin(f->tk.gain_step, f->tk.gain_alpha * diff));
-            f->gain += step;
-            /* the hiss is on the tape, before the knob: the floor moves with it */
-            for (int b = 0; b < FLOOR_BLOCKS; b++)
-                f->floor_min[b] += step;
-            f->nf += step;
+            move_gain(f, step);
         }
         f->gain_slow += f->tk.gain_slow_alpha * (f->gain - f->gain_slow);
     }
