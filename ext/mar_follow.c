@@ -138,7 +138,8 @@
 #define H_SLOW 0.003            /* tracking peak height: long-run average, per measurement and REF_PERIOD [1] */
 #define H_FAST 0.1              /* ... short-run average, per measured (not quiet) REF_PERIOD [1] */
 #define DOUBT_DROP 0.25         /* short-run height this far under the long-run one: doubt the place [1] */
-#define CLEAR_DB 15.0           /* doubt only where the live music averages this far over the noise floor [dB] */
+#define CLEAR_DB 15.0           /* clear music: live, on average this far over the noise floor (doubt only there);
+                                 * stored, a frame this close to the loud reference (a cue refuted only there) [dB] */
 #define NEUTRAL_DB 1.0          /* a frame within this of a silent run's level range ... */
 #define REGAIN_S 0.5            /* measurements in a row for this long end a hold with the search beside [s] */
 #define PROBATION_BAD_S 0.2     /* bad ticks for this long in probation (after a resume) send the place to the search [s] */
@@ -183,7 +184,7 @@ static const double CUE_FIT_AT_S[CUE_FITS] = {      /* ... this much music [s]: 
     0.32, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0, 1.1, 1.2, 1.3, 1.4,   /* while the rate is open, */
     1.5, 1.6, 1.7, 1.8, 1.9, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0,    /* then every 0.5 s */
     5.5, 6.0, 6.5, 7.0, 7.5, 8.0, 8.5, 9.0};
-#define CUE_REFUTE_S 2.0        /* no fit by this much music refutes the cue [s] */
+#define CUE_REFUTE_S 2.0        /* no fit from this much music on refutes the cue [s] */
 #define CUE_RATE_SPAN 0.07      /* rates 1 +- this [stored ticks per tick] ... */
 #define CUE_RATE_STEP 0.005     /* ... in these steps */
 #define CUE_LAGS 5              /* offsets from the line through the cue, either way [ticks] */
@@ -255,7 +256,7 @@ typedef struct {
         long_hold, search_gap, leader, leader_wait;     /* [ticks] */
     size_t resume_min_window, fit_min, resume_look, onset_back, gap_ahead, clear_window;  /* [ticks] */
     size_t cue_fit_at[CUE_FITS];  /* [ticks] */
-    int cue_refute_fit;           /* the fit (index) that refutes the cue when nothing fits */
+    int cue_refute_fit;           /* the first fit (index) that may refute the cue when nothing fits */
     double level_release, gain_step;    /* [dB per tick] */
     double gain_alpha, gain_slow_alpha, pause_alpha, h_fast, h_slow;   /* smoothing per tick [1] */
     /* the model's */
@@ -1948,15 +1949,28 @@ static int cue_fit_now(mar_follow *f, size_t ages)
     return 1;
 }
 
+/* Would the stored music of the last clear_window before stored frame p
+ * be heard over a tape's hiss: does a frame of it come within CLEAR_DB of
+ * the piece's loud reference? A quiet intro may lie under the hiss, and a
+ * line that fails there is no evidence against the cue. */
+static int loud_at(const mar_follow *f, double p)
+{
+    long end = (long)p, begin = end - (long)f->tk.clear_window;
+    for (long j = begin > 0 ? begin : 0; j < end && j < (long)f->n; j++)
+        if (f->sdb[j] >= f->s_level - CLEAR_DB)
+            return 1;
+    return 0;
+}
+
 /* After CUE_FIT_AT frames of music: the rate and offset on lines through
  * the cue that fit the live music best. Two clear fits in a row on the
- * same line lock; a sharp fit places the line; no fit reaching
- * track_threshold after 2 s of music refutes the cue (flat music is no
+ * same line lock; a sharp fit places the line; a fit from 2 s of music on
+ * that misses track_threshold where the stored music would be heard
+ * (loud_at) refutes the cue (flat live music and a quiet intro are no
  * evidence): the whole-piece search takes over, the position running on. */
 static void cue_fit(mar_follow *f, uint32_t *flags)
 {
     size_t ages = (size_t)(f->t + 1 - f->cue_onset);
-    int before = f->cue_fits;
     if (!cue_fit_now(f, ages))
         return;
     double best_r, best_d, best_kappa;
@@ -2013,8 +2027,8 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         f->kf.p = line_now;
         f->kf.r = best_r;
         mar_kf_init(&f->kf, 1.0, 4.0 / ((double)ages * (double)ages));  /* a tick over the fit, twice [1] */
-    } else if (before <= f->tk.cue_refute_fit && f->cue_fits > f->tk.cue_refute_fit
-               && best < f->opt.track_threshold) {   /* NaN: flat, not refuted */
+    } else if (f->cue_fits > f->tk.cue_refute_fit && best < f->opt.track_threshold   /* NaN: flat */
+               && loud_at(f, f->cue_from + (double)ages)) {
         f->cue_pending = 0;                                     /* refuted */
         f->state = MAR_FOLLOW_SEARCHING;
         f->doubt = f->probation = f->regaining = 0;

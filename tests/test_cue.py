@@ -3,6 +3,7 @@ silence before the music, plays from the music's onset, and never locks on
 the cue's word alone. Random decks from the bench's synthesizer and tape
 deck, fixed seeds."""
 import functools
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -10,13 +11,13 @@ import pytest
 from conftest import make_figure, run_cli
 from marionette.engine import Engine
 from marionette.music.feature import loudness, onsets, write_wav
-from marionette.music.follower import STATES, Follower, sync_ticks
+from marionette.music.follower import OPTIONS, STATES, Follower, sync_ticks
 from marionette.show import Show
 from marionette.sim.music import STYLES, synthesize
 from marionette.sim.tape import Deck, play
 
 T = 0.020
-LOCKED, WAITING = STATES.index("locked"), STATES.index("waiting")
+LOCKED, WAITING, SEARCHING = STATES.index("locked"), STATES.index("waiting"), STATES.index("searching")
 
 
 def live_frames_of(samples, rate):
@@ -121,6 +122,44 @@ def test_a_wrong_cue_is_refuted_without_a_false_lock():
                    "wrong cue (docs/music.md)")
 def test_a_wrong_cue_in_slow_pads_is_refuted_without_a_false_lock():
     wrong_cue(("ambient",), 30, later_s=10.0)
+
+
+def quiet_intro(piece, depth_db, fade_s):
+    """The piece faded in from depth_db under over its first fade_s [s],
+    after a 20 ms click 20 dB under its loud frames (so the cue's music
+    starts at the first frame, as on the real recording hr3-caves)."""
+    x = piece.samples.copy()
+    n = int(fade_s * piece.sample_rate)
+    x[:n] *= 10.0 ** (np.linspace(-depth_db, 0.0, n) / 20.0)
+    loud = np.percentile(loudness(piece.samples, piece.sample_rate), 90)
+    k = np.arange(int(0.02 * piece.sample_rate))
+    x[:len(k)] = 0.1 * loud * np.sqrt(2.0) * np.sin(2.0 * np.pi * 1000.0 * k / piece.sample_rate)
+    return replace(piece, samples=x)
+
+
+def test_a_quiet_intro_under_the_hiss_does_not_refute_the_cue():
+    """A fade-in from 35-45 dB down under 25-30 dB of hiss: a failing line
+    through the cue is no evidence while the stored music lies under the
+    hiss, so the cue holds at least as long as any hold does (lost_after)
+    rather than being refuted at its 2 s fit; then the place is followed,
+    never LOCKED off. Measured: the build before searched at 2 s in 7 of
+    these 9 decks, this one from 4.1 s at the earliest (3 of 9)."""
+    lost_after = OPTIONS["lost_after"]["default"]                # [s]
+    rng = np.random.default_rng(44)
+    for case in range(9):
+        piece, _ = taught(("pop", "waltz", "techno")[case % 3], int(rng.integers(1, 100)))
+        depth, fade = float(rng.uniform(35.0, 45.0)), float(rng.uniform(6.0, 10.0))     # [dB], [s]
+        piece = quiet_intro(piece, depth, fade)
+        stored = live_frames_of(piece.samples, piece.sample_rate)
+        deck = Deck(speed=float(rng.uniform(0.95, 1.05)), snr_db=float(rng.uniform(25.0, 30.0)), start=0.0,
+                    seconds=fade + 8.0, sample_rate=11025, seed=case)
+        track, _, err = track_of(piece, stored, deck, 0.0)
+        t = np.arange(len(err)) * T
+        searching = t[track.state == SEARCHING]
+        assert not np.any(searching < lost_after), (case, searching[:1])
+        locked = track.state == LOCKED
+        assert np.all(np.abs(err[locked]) <= 0.05), (case, np.abs(err[locked]).max())
+        assert np.mean(np.abs(err[t >= fade + 1.0]) <= 0.05) >= 0.99, case
 
 
 def leader_then_music(styles, seed, share):
