@@ -119,7 +119,8 @@
 #define RESUME_VAR 16.0         /* position variance after a resume [tick^2] */
 #define PAUSE_ALPHA 0.2         /* the silence's level estimate, smoothing per REF_PERIOD [1] */
 #define MIN_RESUME_DB 3.0       /* ... or less where the music is quiet, not below this [dB] */
-#define LOUD_DB 15.0            /* stored frames within this of the stored level count for the gain [dB] */
+#define LOUD_DB 15.0            /* stored frames within this of the stored level are loud: they count for the gain,
+                                 * and only where they are heard may a cue be refuted [dB] */
 #define GAIN_STEP 25.0          /* the gain estimate moves at most this fast [dB/s] */
 #define GAIN_ALPHA 0.1          /* live-minus-stored gain estimate smoothing per REF_PERIOD [1] */
 #define GAIN_SLOW_ALPHA 0.02    /* ... and its slow twin's (a time constant of 1 s) [1] */
@@ -138,8 +139,7 @@
 #define H_SLOW 0.003            /* tracking peak height: long-run average, per measurement and REF_PERIOD [1] */
 #define H_FAST 0.1              /* ... short-run average, per measured (not quiet) REF_PERIOD [1] */
 #define DOUBT_DROP 0.25         /* short-run height this far under the long-run one: doubt the place [1] */
-#define CLEAR_DB 15.0           /* clear music: live, on average this far over the noise floor (doubt only there);
-                                 * stored, a frame this close to the loud reference (a cue refuted only there) [dB] */
+#define CLEAR_DB 15.0           /* doubt only where the live music averages this far over the noise floor [dB] */
 #define NEUTRAL_DB 1.0          /* a frame within this of a silent run's level range ... */
 #define REGAIN_S 0.5            /* measurements in a row for this long end a hold with the search beside [s] */
 #define PROBATION_BAD_S 0.2     /* bad ticks for this long in probation (after a resume) send the place to the search [s] */
@@ -1950,14 +1950,14 @@ static int cue_fit_now(mar_follow *f, size_t ages)
 }
 
 /* Would the stored music of the last clear_window before stored frame p
- * be heard over a tape's hiss: does a frame of it come within CLEAR_DB of
- * the piece's loud reference? A quiet intro may lie under the hiss, and a
+ * be heard over a tape's hiss: is a frame of it loud (within LOUD_DB of
+ * the piece's loud reference)? A quiet intro may lie under the hiss, and a
  * line that fails there is no evidence against the cue. */
 static int loud_at(const mar_follow *f, double p)
 {
     long end = (long)p, begin = end - (long)f->tk.clear_window;
     for (long j = begin > 0 ? begin : 0; j < end && j < (long)f->n; j++)
-        if (f->sdb[j] >= f->s_level - CLEAR_DB)
+        if (f->sdb[j] >= f->s_level - LOUD_DB)
             return 1;
     return 0;
 }

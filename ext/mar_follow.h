@@ -243,7 +243,8 @@ void mar_follow_reset(mar_follow *f, double position);
  * line that lead every other place of the piece. The tracker alone never
  * makes a pending cue LOCKED; the whole-piece search listens beside it and
  * its lock ends the cue; a cue the music refutes (no fit from 2 s of music
- * on, where the stored music would be heard over hiss) hands over to it. NaN: no cue, search the whole piece (as after create). */
+ * on, where the stored music would be heard over hiss) hands over to it.
+ * NaN: no cue, search the whole piece (as after create). */
 void mar_follow_cue(mar_follow *f, double position);
 
 /* One tick of the show's clock, the way the engine and every offline tool
