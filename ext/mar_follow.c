@@ -6,9 +6,10 @@
  * matter). The volume knob adds a constant to L, which the correlation
  * (Pearson: means and spreads removed per window) ignores. With band
  * levels each band goes through the same map on its own, and the
- * correlations run jointly over the bands (mar_follow_corr.h: each band's
- * mean out per window, so a fixed colouring is ignored too) wherever the
- * newest frame brought as many bands as the show has ("the main channel");
+ * correlations average the bands' own (mar_follow_corr.h: a fixed
+ * colouring is ignored too; the search's coarse blocks correlate jointly
+ * over the bands) wherever the newest frame brought as many bands as the
+ * show has ("the main channel");
  * the level logic (pause, onset, floor, gain) stays on the loudness.
  *
  * The line. A hypothesis "the live music is at stored position p now and
@@ -958,7 +959,8 @@ static void prepare_search(mar_follow *f)
 }
 
 /* Coarse score of block offset o (now = stored position o * coarse) at
- * rate k: the joint correlation over the main feature's bands. */
+ * rate k: the joint correlation over the main feature's bands (each band
+ * on its own, as mar_corr_lags, cost a real false lock: docs/music.md). */
 static double coarse_score(const mar_follow *f, long o, size_t k)
 {
     const size_t M = f->m_eff, nb = f->main->bands;

@@ -56,7 +56,7 @@ double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_
                      int lags, double *rho)
 {
     const size_t nb = stored->bands;
-    double lm[MAR_CORR_MAX_BANDS], ll = 0.0;
+    double lm[MAR_CORR_MAX_BANDS], llb[MAR_CORR_MAX_BANDS], ll = 0.0;
     for (size_t b = 0; b < nb; b++) {
         const double *l = live + b * cap;
         double sum = 0.0, ss = 0.0;
@@ -65,11 +65,12 @@ double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_
         lm[b] = sum / (double)len;
         for (size_t k = 0; k < len; k++)
             ss += (l[k] - lm[b]) * (l[k] - lm[b]);
+        llb[b] = ss;
         ll += ss;
     }
     for (int d = -lags; d <= lags; d++) {
         long js = at + d;
-        double cov = 0.0, ss = 0.0;
+        double num = 0.0, wsum = 0.0;      /* sum of sqrt(ss_b) rho_b, sum of sqrt(ss_b) */
         for (size_t b = 0; b < nb; b++) {
             const double *l = live + b * cap, *s = stored->v + b * stored->stride + js, m = lm[b];
             double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
@@ -82,13 +83,15 @@ double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_
             }
             for (; k < len; k++)
                 a0 += (l[k] - m) * s[k];
-            cov += a0 + a1 + a2 + a3;
             const double *q1 = stored->q1 + b * (stored->stride + 1), *q2 = stored->q2 + b * (stored->stride + 1);
             size_t q = (size_t)js;
-            double s1 = q1[q + len] - q1[q], s2 = q2[q + len] - q2[q];
-            ss += s2 - s1 * s1 / (double)len;
+            double s1 = q1[q + len] - q1[q], ss = q2[q + len] - q2[q] - s1 * s1 / (double)len;
+            if (llb[b] > 1e-9 && ss > 1e-9) {          /* a band flat on either side says nothing */
+                num += (a0 + a1 + a2 + a3) / sqrt(llb[b]);
+                wsum += sqrt(ss);
+            }
         }
-        rho[d + lags] = (ll > 1e-9 * (double)nb && ss > 1e-9 * (double)nb) ? cov / sqrt(ll * ss) : 0.0;
+        rho[d + lags] = wsum > 0.0 ? num / wsum : 0.0;
     }
     return sqrt(ll / ((double)len * (double)nb));
 }

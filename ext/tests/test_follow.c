@@ -267,9 +267,8 @@ static void test_corr_lags(int cases)
         long at = lags + (long)uniform(0.0, 8.0);
         int d0 = lags ? (int)uniform(-(double)lags, (double)lags + 1.0) : 0;
         int copy = c % 3 == 0;                      /* every third: a copy of the stored music at lag d0 */
-        double gain = uniform(0.5, 2.0);
         for (size_t b = 0; b < nb; b++) {
-            double shift = uniform(-10.0, 10.0);
+            double gain = uniform(0.5, 2.0), shift = uniform(-10.0, 10.0);   /* each band its own */
             for (size_t k = 0; k < len; k++)
                 live[b * CAP + k] = copy ? gain * stored[b * STRIDE + (size_t)(at + d0) + k] + shift
                                          : uniform(-40.0, 0.0);
@@ -286,17 +285,20 @@ static void test_corr_lags(int cases)
         }
         CHECK(fabs(spread - sqrt(ll / (double)(len * nb))) < 1e-9, "case %d: spread %g", c, spread);
         for (int d = -lags; d <= lags; d++) {
-            double cov = 0.0, ss = 0.0;
+            double num = 0.0, wsum = 0.0;          /* per band Pearson, weighted by stored spread */
             for (size_t b = 0; b < nb; b++) {
                 const double *sv = stored + b * STRIDE + at + d, *l = live + b * CAP;
-                double sm = 0.0;
+                double sm = 0.0, cov = 0.0, ss = 0.0, lb = 0.0;
                 for (size_t k = 0; k < len; k++)
                     sm += sv[k];
                 sm /= (double)len;
                 for (size_t k = 0; k < len; k++)
-                    cov += (l[k] - lm[b]) * (sv[k] - sm), ss += (sv[k] - sm) * (sv[k] - sm);
+                    cov += (l[k] - lm[b]) * (sv[k] - sm), ss += (sv[k] - sm) * (sv[k] - sm),
+                        lb += (l[k] - lm[b]) * (l[k] - lm[b]);
+                num += sqrt(ss) * cov / sqrt(lb * ss);
+                wsum += sqrt(ss);
             }
-            double want = cov / sqrt(ll * ss);
+            double want = num / wsum;
             CHECK(fabs(rho[d + lags] - want) < 1e-9, "case %d lag %d: rho %.12f, directly %.12f",
                   c, d, rho[d + lags], want);
         }
