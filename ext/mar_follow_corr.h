@@ -60,7 +60,7 @@ typedef struct {
 size_t mar_corr_resample(const mar_corr_history *live, size_t ages, double p, double r, long lo, long hi,
                          size_t cap, double *out, long *j0, double *center);
 
-/* The joint correlation (above) of live[b * cap + 0 .. len) with the
+/* The correlation (above) of live[b * cap + 0 .. len) with the
  * stored frames at + d .. at + d + len of every band, for d = -lags ..
  * lags, into rho[d + lags] (0 where either side is flat). Stored frames at
  * - lags .. at + lags + len and their prefix sums must exist. Returns the
