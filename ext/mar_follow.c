@@ -6,7 +6,7 @@
  * matter). The volume knob adds a constant to L, which the correlation
  * (Pearson: means and spreads removed per window) ignores. With band
  * levels each band goes through the same map on its own, and the
- * correlations average the bands' own (mar_follow_corr.h: a fixed
+ * correlations average each band's own (mar_follow_corr.h: a fixed
  * colouring is ignored too; the search's coarse blocks correlate jointly
  * over the bands) wherever the newest frame brought as many bands as the
  * show has ("the main channel");

@@ -207,9 +207,9 @@ mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double
 /* The same from the music's loudness, onsets and band levels (see
  * mar_follow_music; -EINVAL for a value outside it). With bands, the
  * correlations (tracking, search, cue) run over the bands, each band's
- * mean taken out per window (mar_follow_corr.h), on every window whose newest frame
- * brought as many bands (mar_follow_tick); others, and paper mode, on the
- * loudness. */
+ * mean taken out per window (mar_follow_corr.h), on every window whose
+ * newest frame brought as many bands (mar_follow_tick); others, and paper
+ * mode, on the loudness. */
 mar_follow *mar_follow_create_music(const mar_follow_options *opt, const mar_follow_music *music, int *status);
 void mar_follow_destroy(mar_follow *f);
 

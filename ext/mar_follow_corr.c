@@ -56,7 +56,7 @@ double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_
                      int lags, double *rho)
 {
     const size_t nb = stored->bands;
-    double lm[MAR_CORR_MAX_BANDS], llb[MAR_CORR_MAX_BANDS], ll = 0.0;
+    double lm[MAR_CORR_MAX_BANDS], lsd[MAR_CORR_MAX_BANDS], ll = 0.0;   /* lsd: sqrt of each band's ss */
     for (size_t b = 0; b < nb; b++) {
         const double *l = live + b * cap;
         double sum = 0.0, ss = 0.0;
@@ -65,7 +65,7 @@ double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_
         lm[b] = sum / (double)len;
         for (size_t k = 0; k < len; k++)
             ss += (l[k] - lm[b]) * (l[k] - lm[b]);
-        llb[b] = ss;
+        lsd[b] = sqrt(ss);
         ll += ss;
     }
     for (int d = -lags; d <= lags; d++) {
@@ -86,8 +86,8 @@ double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_
             const double *q1 = stored->q1 + b * (stored->stride + 1), *q2 = stored->q2 + b * (stored->stride + 1);
             size_t q = (size_t)js;
             double s1 = q1[q + len] - q1[q], ss = q2[q + len] - q2[q] - s1 * s1 / (double)len;
-            if (llb[b] > 1e-9 && ss > 1e-9) {          /* a band flat on either side says nothing */
-                num += (a0 + a1 + a2 + a3) / sqrt(llb[b]);
+            if (lsd[b] > sqrt(1e-9) && ss > 1e-9) {   /* a band flat on either side says nothing */
+                num += (a0 + a1 + a2 + a3) / lsd[b];
                 wsum += sqrt(ss);
             }
         }

@@ -24,11 +24,11 @@
 /* Bands. A feature may have several values per frame (the level in a few
  * frequency bands). Each band is correlated on its own (Pearson: its mean
  * and spread out per window, so a volume knob and a fixed colouring, a
- * constant offset per band, and hiss that shrinks a band's live spread are
- * ignored), and the bands' correlations are averaged weighted by the
- * stored window's spread in each: a band at its stored floor tells little.
- * A band flat on either side is left out; 0 when every band is. One band
- * is the plain Pearson correlation. */
+ * constant offset per band, are ignored, and a band whose live swing the
+ * hiss has compressed keeps its say), and the bands' correlations are
+ * averaged, weighted by the stored window's spread in each: a band at its
+ * stored floor tells little. A band flat on either side is left out; 0
+ * when every band is. One band is the plain Pearson correlation. */
 
 #define MAR_CORR_MAX_BANDS 8     /* values per frame, at most */
 
