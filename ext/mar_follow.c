@@ -873,10 +873,16 @@ static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0,
 /* The correlation of f->rs[k0 .. k0 + len) (resampled from the same
  * channel) with its stored feature at frames j0 + k0 + d + k, for d =
  * -lags .. lags (mar_corr_lags). Returns the live spread [dB]. */
+/* A channel's stored side, as the correlations take it. */
+static mar_corr_stored stored_of(const mar_follow *f, const channel *ch)
+{
+    return (mar_corr_stored){ch->buf, ch->q1, ch->q2, f->nfb, ch->bands};
+}
+
 static double correlate_ch(const mar_follow *f, const channel *ch, size_t k0, size_t len, long j0, int lags,
                            double *rho)
 {
-    const mar_corr_stored stored = {ch->buf, ch->q1, ch->q2, f->nfb, ch->bands};
+    const mar_corr_stored stored = stored_of(f, ch);
     return mar_corr_lags(f->rs + k0, f->scap, len, &stored, j0 + (long)k0 + f->pad, lags, rho);
 }
 
@@ -1658,14 +1664,27 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
     if (edge || h < f->opt.track_threshold || !(kappa > 0.0))
         return 0;
     if (f->onsets) {
-        /* the onset feature places the peak: rises survive a room's colouring */
-        double rho2[2 * MAX_LAGS + 1], h2, kappa2;
+        /* the onset feature places the peak: rises survive a room's
+         * colouring. Its lag is the lag where its onsets are, so it is
+         * measured there, not at the window's centre: a window whose one
+         * strong onset lies off centre would otherwise read a rate error as
+         * a position error (on a drone, hr3-desert, the rate ran from 0.97
+         * to rate_min on a tape at 0.94). The band levels change all over
+         * a window, and their centre serves: measured there too, the bench
+         * did not move */
+        double rho2[2 * MAX_LAGS + 1], h2, kappa2, c2;
         int edge2;
-        if (resample_ch(f, &f->onset, f->kf.p, f->kf.r, ages, &j0, &c) == m) {      /* 0: no onsets in the window */
-            correlate_ch(f, &f->onset, 0, m, j0, lags, rho2);
+        long j2;
+        if (resample_ch(f, &f->onset, f->kf.p, f->kf.r, ages, &j2, &c2) == m) {    /* 0: no onsets in the window */
+            correlate_ch(f, &f->onset, 0, m, j2, lags, rho2);
             double d2 = mar_corr_peak(rho2, lags, &h2, &kappa2, &edge2);
-            if (!edge2 && kappa2 > 0.0)
+            if (!edge2 && kappa2 > 0.0) {
+                const mar_corr_stored st = stored_of(f, &f->onset);
+                double k_at = mar_corr_slope_center(&st, j2 + f->pad + (long)floor(d2 + 0.5), m);
                 d = d2, kappa = kappa2;
+                c = (f->kf.p - 0.5 - ((double)j2 + k_at)) / f->kf.r;     /* its age + 0.5 [ticks] */
+                var = mar_kf_lag_var(&f->kf, c);
+            }
         }
     }
     double k = kappa / KAPPA_REF;

@@ -96,6 +96,26 @@ double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_
     return sqrt(ll / ((double)len * (double)nb));
 }
 
+double mar_corr_slope_center(const mar_corr_stored *stored, long at, size_t len)
+{
+    double wsum = 0.0, ksum = 0.0;
+    size_t q = (size_t)at;
+    for (size_t b = 0; b < stored->bands; b++) {
+        const double *s = stored->v + b * stored->stride + at;
+        const double *q1 = stored->q1 + b * (stored->stride + 1), *q2 = stored->q2 + b * (stored->stride + 1);
+        double s1 = q1[q + len] - q1[q], ss = q2[q + len] - q2[q] - s1 * s1 / (double)len;
+        if (!(ss > 1e-9))
+            continue;                                  /* flat: no slope to tell a lag by */
+        double norm = 1.0 / sqrt(ss);
+        for (size_t k = 1; k + 1 < len; k++) {
+            double g = 0.5 * (s[k + 1] - s[k - 1]);
+            wsum += g * g * norm;
+            ksum += g * g * norm * (double)k;
+        }
+    }
+    return wsum > 0.0 ? ksum / wsum : 0.5 * (double)(len - 1);
+}
+
 double mar_corr_peak(const double *rho, int lags, double *height, double *kappa, int *edge)
 {
     int b = 0;

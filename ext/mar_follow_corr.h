@@ -69,6 +69,17 @@ size_t mar_corr_resample(const mar_corr_history *live, size_t ages, double p, do
 double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_stored *stored, long at,
                      int lags, double *rho);
 
+/* Where in a window of len stored frames (at + 0 .. len - 1, every band)
+ * a lag measured on it comes from: the mean frame index k in [0, len - 1]
+ * weighted by the stored feature's squared slope there (central
+ * differences; each band over the root of its spread, as mar_corr_lags
+ * weighs the bands). A correlation's lag is a mean of the local lags
+ * weighted so, and a change of the music tells the lag where it changes:
+ * one onset in a window puts it at the onset, not the window's middle.
+ * (len - 1) / 2 when the window is flat. Stored frames at .. at + len and
+ * their prefix sums must exist. */
+double mar_corr_slope_center(const mar_corr_stored *stored, long at, size_t len);
+
 /* The peak of rho[0 .. 2 lags]: its lag [ticks] from the centre, refined
  * by a parabola through the best lag and its neighbours (at most half a
  * tick), *height the parabola's top, *kappa its curvature [1/tick^2], and

@@ -315,6 +315,66 @@ static void test_corr_lags(int cases)
         CHECK(rho[i] == 0.0, "flat live window: rho[%d] = %g", i, rho[i]);
 }
 
+/* mar_corr_slope_center: a step in one band of a flat window (an onset)
+ * puts the centre halfway between the frames either side of it, whatever
+ * the step's size and the other bands' offsets; a straight ramp puts it at
+ * the window's middle, as does a flat window; and on random windows it is
+ * the slope-weighted mean computed directly (each band's own spread
+ * from two passes, not the prefix sums). */
+static void test_corr_slope_center(int cases)
+{
+    enum { CAP = 300, AT = 4, STRIDE = CAP + 2 * AT, NB = MAR_CORR_MAX_BANDS };
+    static double v[NB * STRIDE], q1[NB * (STRIDE + 1)], q2[NB * (STRIDE + 1)];
+    for (int c = 0; c < cases; c++) {
+        size_t len = (size_t)uniform(3.0, (double)CAP);
+        size_t nb = (size_t)uniform(1.0, (double)NB + 1.0);
+        int kind = c % 4;                           /* 0: a step, 1: a ramp, 2: flat, 3: random */
+        size_t k0 = (size_t)uniform(1.0, (double)len), band = (size_t)uniform(0.0, (double)nb);
+        double size = uniform(-30.0, 30.0), slope = uniform(-2.0, 2.0);
+        for (size_t b = 0; b < nb; b++) {
+            double offset = uniform(-60.0, 0.0);
+            for (size_t i = 0; i < STRIDE; i++) {
+                long k = (long)i - AT;             /* frame index in the window */
+                double x = offset;
+                if (kind == 0 && b == band && k >= (long)k0)
+                    x += size;
+                else if (kind == 1)
+                    x += slope * (double)k;
+                else if (kind == 3)
+                    x = uniform(-40.0, 0.0);
+                v[b * STRIDE + i] = x;
+            }
+            double *s1 = q1 + b * (STRIDE + 1), *s2 = q2 + b * (STRIDE + 1);
+            s1[0] = s2[0] = 0.0;
+            for (size_t i = 0; i < STRIDE; i++)
+                s1[i + 1] = s1[i] + v[b * STRIDE + i], s2[i + 1] = s2[i] + v[b * STRIDE + i] * v[b * STRIDE + i];
+        }
+        const mar_corr_stored st = {v, q1, q2, STRIDE, nb};
+        double got = mar_corr_slope_center(&st, AT, len), want = 0.5 * (double)(len - 1);
+        if (kind == 0 && fabs(size) > 1e-3 && len >= 3)
+            /* the first and the last frame have no central difference */
+            want = k0 == 1 ? 1.0 : k0 == len - 1 ? (double)k0 - 1.0 : (double)k0 - 0.5;
+        if (kind == 3) {
+            double wsum = 0.0, ksum = 0.0;
+            for (size_t b = 0; b < nb; b++) {
+                const double *x = v + b * STRIDE + AT;
+                double mean = 0.0, ss = 0.0;
+                for (size_t k = 0; k < len; k++)
+                    mean += x[k] / (double)len;
+                for (size_t k = 0; k < len; k++)
+                    ss += (x[k] - mean) * (x[k] - mean);
+                for (size_t k = 1; k + 1 < len; k++) {
+                    double g = 0.5 * (x[k + 1] - x[k - 1]);
+                    wsum += g * g / sqrt(ss), ksum += g * g / sqrt(ss) * (double)k;
+                }
+            }
+            want = ksum / wsum;
+        }
+        CHECK(fabs(got - want) < 1e-6 * (double)len, "case %d (kind %d, %zu frames, %zu bands): centre %.9f, want %.9f",
+              c, kind, len, nb, got, want);
+    }
+}
+
 /* Correlation along a line: live frames are smooth stored music played at
  * rate r from p0 (one in 20 missing), in 1 to 4 bands with an offset
  * each; resampled along a line d ticks
@@ -577,6 +637,7 @@ int main(void)
     test_random_inputs(18);
     test_follows();
     test_corr_lags(300);
+    test_corr_slope_center(400);
     test_corr_along_a_line(200);
     test_corr_peak(300);
     test_kf(300);
