@@ -274,7 +274,7 @@ struct mar_follow {
     long pad;                   /* padding frames before and after the stored feature */
     size_t nfb;                 /* stored frames per band with the padding: n + 2 pad */
     double *sdb_buf, *sdb;      /* stored level [dB], sdb[-pad .. n + pad) */
-    int onsets;                 /* 1: made with onsets; the tracker places its peak on the onset feature */
+    int onsets;                 /* 1: made with onsets; the tracker measures the onset feature's lag as well */
     double s_level;             /* loud reference of the stored music [dB] */
     channel level;              /* the loudness's level feature (one band) */
     channel onset;              /* the onset feature: level + onset_weight * onset strength (one band) */
@@ -1627,6 +1627,21 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
     }
 }
 
+/* One lag measurement d [ticks], c ticks in the past, into the filter: its
+ * variance from the peak's curvature, times `share` (2: one of two
+ * measurements of the same frames). Returns 0 when the gate (3 sigma, and
+ * at least a tick) turns it away. */
+static int lag_update(mar_follow *f, double c, double d, double kappa, double share)
+{
+    double var = mar_kf_lag_var(&f->kf, c);                           /* [tick^2] */
+    double k = kappa / KAPPA_REF;
+    double R = share * f->tk.meas_noise * f->tk.meas_noise / (k < 1.0 ? (k > 0.01 ? k : 0.01) : 1.0);
+    if (d * d > 9.0 * (var + R) + 1.0)
+        return 0;
+    mar_kf_update(&f->kf, c, d, R);
+    return 1;
+}
+
 /* Smooth tracking measurement; returns 1 if used, sets *quiet. The lags
  * searched cover 3 sigma of the predicted measurement (3 ticks at least,
  * WIDE_LAGS at most): wide after a resume, narrow while following. */
@@ -1663,35 +1678,42 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
     f->h_fast += f->tk.h_fast * (h - f->h_fast);
     if (edge || h < f->opt.track_threshold || !(kappa > 0.0))
         return 0;
+    /* With onsets, the onset feature's lag too: rises survive a room's
+     * colouring, which gives each held chord its own gain. Its lag is the
+     * lag where the onsets are, so it is measured there (its slope centre),
+     * not at the window's centre: one strong onset off the centre would
+     * read a rate error as a position error. The bands' lag stays at the
+     * window's centre (they change all over it: their own slope centre
+     * moved the bench by hundredths of a point), and the two measure the
+     * same frames, so each counts half. The loudness alone carries the
+     * room's gains into its lag (tests/test_follow.py, the reverberant
+     * room: 3 of 8 decks held with both lags, 6 with the onset lag alone):
+     * without bands the onset lag replaces it. */
+    double d2 = NAN, kappa2 = 0.0, c2 = 0.0;
     if (f->onsets) {
-        /* the onset feature places the peak: rises survive a room's
-         * colouring. Its lag is the lag where its onsets are, so it is
-         * measured there, not at the window's centre: a window whose one
-         * strong onset lies off centre would otherwise read a rate error as
-         * a position error (on a drone, hr3-desert, the rate ran from 0.97
-         * to rate_min on a tape at 0.94). The band levels change all over
-         * a window, and their centre serves: measured there too, the bench
-         * did not move */
-        double rho2[2 * MAX_LAGS + 1], h2, kappa2, c2;
+        double rho2[2 * MAX_LAGS + 1], h2;
         int edge2;
         long j2;
         if (resample_ch(f, &f->onset, f->kf.p, f->kf.r, ages, &j2, &c2) == m) {    /* 0: no onsets in the window */
             correlate_ch(f, &f->onset, 0, m, j2, lags, rho2);
-            double d2 = mar_corr_peak(rho2, lags, &h2, &kappa2, &edge2);
+            double lag = mar_corr_peak(rho2, lags, &h2, &kappa2, &edge2);
             if (!edge2 && kappa2 > 0.0) {
                 const mar_corr_stored st = stored_of(f, &f->onset);
-                double k_at = mar_corr_slope_center(&st, j2 + f->pad + (long)floor(d2 + 0.5), m);
-                d = d2, kappa = kappa2;
-                c = (f->kf.p - 0.5 - ((double)j2 + k_at)) / f->kf.r;     /* its age + 0.5 [ticks] */
-                var = mar_kf_lag_var(&f->kf, c);
+                double k_at = mar_corr_slope_center(&st, j2 + f->pad + (long)floor(lag + 0.5), m);
+                d2 = lag;
+                c2 = (f->kf.p - 0.5 - ((double)j2 + k_at)) / f->kf.r;     /* its age + 0.5 [ticks] */
             }
         }
     }
-    double k = kappa / KAPPA_REF;
-    double R = f->tk.meas_noise * f->tk.meas_noise / (k < 1.0 ? (k > 0.01 ? k : 0.01) : 1.0);
-    if (d * d > 9.0 * (var + R) + 1.0)                /* gate: 3 sigma, and at least a tick */
+    if (!isnan(d2) && f->main != &f->band)
+        d = d2, kappa = kappa2, c = c2, d2 = NAN;
+    double share = isnan(d2) ? 1.0 : 2.0;
+    double p0 = f->kf.p, r0 = f->kf.r;
+    int used = lag_update(f, c, d, kappa, share);
+    if (!isnan(d2))         /* its lag from the line as the first update left it */
+        used |= lag_update(f, c2, d2 - ((f->kf.p - p0) - c2 * (f->kf.r - r0)), kappa2, share);
+    if (!used)
         return 0;
-    mar_kf_update(&f->kf, c, d, R);
     f->h_slow += f->tk.h_slow * (h - f->h_slow);
     double qual = (h - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->conf += 0.05 * (qual - f->conf);
@@ -2084,8 +2106,9 @@ static double line_score(mar_follow *f, int ch, double p, double r, size_t ages)
  * than the tracker's line by half a cue lock's lead, and lies more than
  * a tick from it somewhere over the fit (less is within what either line
  * can tell: the fit's rate is on a grid, its peak wanders by some tenths
- * of a tick), the tracker starts again from it, as at the lock. With onsets the onset feature fits and scores (where the window
- * has onsets), as it places the tracker's peak. */
+ * of a tick), the tracker starts again from it, as at the lock. With
+ * onsets the onset feature fits and scores (where the window has onsets),
+ * as it places the cue's line (onset_line). */
 static void cue_refine(mar_follow *f)
 {
     size_t ages = (size_t)(f->t + 1 - f->cue_onset);

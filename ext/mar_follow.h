@@ -200,8 +200,9 @@ mar_follow *mar_follow_create(const mar_follow_options *opt, const double *store
                               int *status);
 /* The same, with each stored frame's onset strength (n_stored values,
  * finite and >= 0 [dB]; NULL: none, as mar_follow_create): the tracker then
- * places its peak on the onset feature, the loudness feature plus
- * opt.onset_weight times the onset (live onsets through mar_follow_step_onset). */
+ * measures the lag of the onset feature (the loudness feature plus
+ * opt.onset_weight times the onset) as well as the loudness's (live onsets
+ * through mar_follow_step_onset). */
 mar_follow *mar_follow_create_onsets(const mar_follow_options *opt, const double *stored,
                                      const double *onset, size_t n_stored, int *status);
 /* The same from the music's loudness, onsets and band levels (see

@@ -85,9 +85,7 @@ PER_BAND = "since the per-band correlation (docs/music.md, 'Each band on its own
 @pytest.mark.parametrize("seed", [21, pytest.param(22, marks=pytest.mark.xfail(
     strict=True, reason=PER_BAND + "the followed place's window fits 0.93 against its usual 0.97 for 0.7 s "
                         "before the stop, the place belief falls under 0.5 and the motion belief is not asked")),
-    23, pytest.param(24, marks=pytest.mark.xfail(
-    strict=True, reason="the stop is dated 3 ticks late (the room's tail) and the restart, measured "
-                        "on a few frames, is read as a stop again: back 0.66 s after the restart"))])
+    23, 24])
 def test_a_stop_is_paused_and_the_music_back_resumes_it(seed):
     """A tape stopped 8-12 s in for 2-5 s: PAUSED within 0.5 s of the stop,
     and within 50 ms of the truth (not PAUSED) 0.5 s after the restart

@@ -1,6 +1,6 @@
 """The music's loudness, one value per 20 ms tick: the feature the engine
 correlates at the show against the one stored at teach time; and beside it
-the onset strength (OnsetMeter), which places the tracker's peak.
+the onset strength (OnsetMeter), whose lag the tracker measures as well.
 
 The same code computes it at both times, so the two agree by construction:
 
