@@ -870,15 +870,15 @@ static size_t resample(mar_follow *f, double p, double r, size_t ages, long *j0,
     return resample_ch(f, f->main, p, r, ages, j0, center);
 }
 
-/* The correlation of f->rs[k0 .. k0 + len) (resampled from the same
- * channel) with its stored feature at frames j0 + k0 + d + k, for d =
- * -lags .. lags (mar_corr_lags). Returns the live spread [dB]. */
 /* A channel's stored side, as the correlations take it. */
 static mar_corr_stored stored_of(const mar_follow *f, const channel *ch)
 {
     return (mar_corr_stored){ch->buf, ch->q1, ch->q2, f->nfb, ch->bands};
 }
 
+/* The correlation of f->rs[k0 .. k0 + len) (resampled from the same
+ * channel) with its stored feature at frames j0 + k0 + d + k, for d =
+ * -lags .. lags (mar_corr_lags). Returns the live spread [dB]. */
 static double correlate_ch(const mar_follow *f, const channel *ch, size_t k0, size_t len, long j0, int lags,
                            double *rho)
 {
