@@ -52,6 +52,16 @@ size_t mar_corr_resample(const mar_corr_history *live, size_t ages, double p, do
     return m;
 }
 
+/* Band b's sum of squares about its mean over the stored frames at .. at
+ * + len - 1, from the prefix sums. */
+static double stored_ss(const mar_corr_stored *stored, size_t b, long at, size_t len)
+{
+    const double *q1 = stored->q1 + b * (stored->stride + 1), *q2 = stored->q2 + b * (stored->stride + 1);
+    size_t q = (size_t)at;
+    double s1 = q1[q + len] - q1[q];
+    return q2[q + len] - q2[q] - s1 * s1 / (double)len;
+}
+
 double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_stored *stored, long at,
                      int lags, double *rho)
 {
@@ -83,9 +93,7 @@ double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_
             }
             for (; k < len; k++)
                 a0 += (l[k] - m) * s[k];
-            const double *q1 = stored->q1 + b * (stored->stride + 1), *q2 = stored->q2 + b * (stored->stride + 1);
-            size_t q = (size_t)js;
-            double s1 = q1[q + len] - q1[q], ss = q2[q + len] - q2[q] - s1 * s1 / (double)len;
+            double ss = stored_ss(stored, b, js, len);
             if (lsd[b] > sqrt(1e-9) && ss > 1e-9) {   /* a band flat on either side says nothing */
                 num += (a0 + a1 + a2 + a3) / lsd[b];
                 wsum += sqrt(ss);
@@ -99,11 +107,9 @@ double mar_corr_lags(const double *live, size_t cap, size_t len, const mar_corr_
 double mar_corr_slope_center(const mar_corr_stored *stored, long at, size_t len)
 {
     double wsum = 0.0, ksum = 0.0;
-    size_t q = (size_t)at;
     for (size_t b = 0; b < stored->bands; b++) {
         const double *s = stored->v + b * stored->stride + at;
-        const double *q1 = stored->q1 + b * (stored->stride + 1), *q2 = stored->q2 + b * (stored->stride + 1);
-        double s1 = q1[q + len] - q1[q], ss = q2[q + len] - q2[q] - s1 * s1 / (double)len;
+        double ss = stored_ss(stored, b, at, len);
         if (!(ss > 1e-9))
             continue;                                  /* flat: no slope to tell a lag by */
         double norm = 1.0 / sqrt(ss);
