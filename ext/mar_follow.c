@@ -202,7 +202,8 @@ static const double CUE_FIT_AT_S[CUE_FITS] = {      /* ... this much music [s]: 
                                   * window knows the rate to a few % [1] */
 #define CUE_LOCK 0.8            /* a fit this good, and sharp, locks the cue [1] ... */
 #define CUE_PRIOR 0.5           /* ... if it leads every other place by this times a search lock's lead,
-                                 * over the square root of the bands [1] */
+                                 * over the square root of the bands (with bands: if no other place
+                                 * leads it by that much) [1] */
 
 typedef struct {
     double p;                   /* position at step t [stored ticks] */
@@ -1969,8 +1970,9 @@ static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
     return best;
 }
 
-/* The lead in Fisher z a cue's line needs over any other place, from a
- * window of `frames` live frames: a share of a search lock's (the cue is
+/* The lead in Fisher z a cue's line needs over any other place (with
+ * bands: no other place may lead it by this), from a window of `frames`
+ * live frames: a share of a search lock's (the cue is
  * the operator's word), shrinking as 1/sqrt(bands) as lock_lead does with
  * the frames (b bands hold b times the independent values of one). */
 static double cue_lead(const mar_follow *f, size_t frames)
@@ -2039,7 +2041,15 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
     double lead = fisher(best) - fisher(rival);
     if (best >= f->opt.track_threshold)
         onset_line(f, ages, &best_r, &best_d);
-    int clear = best >= CUE_LOCK && sharp && lead >= cue_lead(f, ages);
+    /* With bands a repeat of the music's opening fits about as well as the
+     * top (on the synthesized pieces the first 0.3-0.5 s fit later bars at
+     * 0.96-0.99), and a lead over it held those cues until the music parted
+     * from its repeats (0.6-7 s): there the cue, the operator's word, locks
+     * unless another place leads it by cue_lead. On loudness alone the lead
+     * also guards the line: slow pads fit lines through the cue at several
+     * rates, and a lock on one hands the tracker a wrong rate */
+    double need = f->main->bands > 1 ? -cue_lead(f, ages) : cue_lead(f, ages);
+    int clear = best >= CUE_LOCK && sharp && lead >= need;
     double line_now = f->cue_from + best_r * ((double)ages - 0.5) + best_d;     /* [stored ticks] */
     /* two clear fits in a row on the same line, as a search lock is confirmed */
     int confirmed = clear && fabs(line_now - (f->cue_prev + best_r * (double)(f->t - f->cue_prev_t))) <= 1.0;

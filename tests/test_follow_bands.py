@@ -20,8 +20,8 @@ from taught_music import taught
 
 T = 0.020                                            # tick [s]
 LOCKED = STATES.index("locked")
-MEDIAN_LOCK_S = 1.0             # the median right cue's lock, at most [s] (measured 0.85; 1.1 before)
-LAST_LOCK_S = 2.0               # the last right cue's lock, at most [s] (measured 1.6; 3.0 before)
+MEDIAN_LOCK_S = 0.5             # the median right cue's lock, at most [s] (measured 0.40; 0.80 before)
+LAST_LOCK_S = 0.8               # the last right cue's lock, at most [s] (measured 0.6; 0.9 before)
 
 
 def live_frames(piece, deck):
@@ -98,8 +98,8 @@ def hissy_tape(seed, speed, start):
 
 def test_with_bands_a_right_cue_locks_sooner_and_a_wrong_one_never():
     """Cued at the top: 16 random decks at 0.94-1.06 from the top, and 8
-    started 10-60 s in (the cue wrong). With bands a cue's line needs a
-    smaller lead over the rest of the piece (docs/music.md): the median
+    started 10-60 s in (the cue wrong). With bands a cue's line locks
+    unless another place leads it (docs/music.md): the median
     right cue is LOCKED within 50 ms by MEDIAN_LOCK_S of music and every
     one by LAST_LOCK_S, and no deck enters LOCKED more than 0.5 s off."""
     rng = np.random.default_rng(20261205)
