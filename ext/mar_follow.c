@@ -202,8 +202,8 @@ static const double CUE_FIT_AT_S[CUE_FITS] = {      /* ... this much music [s]: 
                                   * window knows the rate to a few % [1] */
 #define CUE_LOCK 0.8            /* a fit this good, and sharp, locks the cue [1] ... */
 #define CUE_PRIOR 0.5           /* ... if it leads every other place by this times a search lock's lead,
-                                 * over the square root of the bands (with bands: if no other place
-                                 * leads it by that much) [1] */
+                                 * over the square root of the bands; with bands, if no other place
+                                 * leads it by that much (cue_lead, cue_fit) [1] */
 
 typedef struct {
     double p;                   /* position at step t [stored ticks] */
@@ -1970,11 +1970,13 @@ static double cue_rival(const mar_follow *f, size_t m, long j0, double d)
     return best;
 }
 
-/* The lead in Fisher z a cue's line needs over any other place (with
- * bands: no other place may lead it by this), from a window of `frames`
- * live frames: a share of a search lock's (the cue is
- * the operator's word), shrinking as 1/sqrt(bands) as lock_lead does with
- * the frames (b bands hold b times the independent values of one). */
+/* A cue's lead in Fisher z, from a window of `frames` live frames: a
+ * share of a search lock's (the cue is the operator's word), shrinking as
+ * 1/sqrt(bands) as lock_lead does with the frames (b bands hold b times
+ * the independent values of one). cue_fit's lock asks a cue's line to
+ * lead every other place by it on loudness alone, and lets another place
+ * lead by it with bands; cue_refine asks a refit to lead the tracker's
+ * line by it. */
 static double cue_lead(const mar_follow *f, size_t frames)
 {
     return CUE_PRIOR * lock_lead(f, frames) / sqrt((double)f->main->bands);
@@ -2113,7 +2115,7 @@ static double line_score(mar_follow *f, int ch, double p, double r, size_t ages)
  * difference (their lag is e_p - c e_r, near 0), and its filter, fed the
  * same frames every tick, grows sure of the line. A fit over all the
  * music since is one estimate from more of it: where it correlates better
- * than the tracker's line by half a cue lock's lead, and lies more than
+ * than the tracker's line by cue_lead, and lies more than
  * a tick from it somewhere over the fit (less is within what either line
  * can tell: the fit's rate is on a grid, its peak wanders by some tenths
  * of a tick), the tracker starts again from it, as at the lock. With

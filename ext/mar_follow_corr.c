@@ -114,9 +114,9 @@ double mar_corr_slope_center(const mar_corr_stored *stored, long at, size_t len)
             continue;                                  /* flat: no slope to tell a lag by */
         double norm = 1.0 / sqrt(ss);
         for (size_t k = 1; k + 1 < len; k++) {
-            double g = 0.5 * (s[k + 1] - s[k - 1]);
-            wsum += g * g * norm;
-            ksum += g * g * norm * (double)k;
+            double g = 0.5 * (s[k + 1] - s[k - 1]), w = g * g * norm;
+            wsum += w;
+            ksum += w * (double)k;
         }
     }
     return wsum > 0.0 ? ksum / wsum : 0.5 * (double)(len - 1);
