@@ -2638,8 +2638,13 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         start_search(f, from);
         if (!f->regaining)
             f->regaining = 1, f->regain_ok = 0, f->regain_bad = f->bad_since;
-    } else if (f->probation || (f->cue_pending && f->cue_fits > f->tk.cue_refute_fit)) {
-        start_search(f, f->seg_start);      /* an unproven place: the search decides */
+    } else if (f->probation || f->cue_pending) {
+        /* an unproven place: the search decides. Beside a pending cue it
+         * runs on from the onset until the cue locks: stopped by a fitting
+         * measurement, a wrong cue's search started afresh at the cue's
+         * refutation and found the place up to 1.8 s later than from an
+         * unknown start (bench sync, docs/music.md) */
+        start_search(f, f->seg_start);
     } else if (ok && f->searching && !f->doubt && !f->regaining) {
         stop_search(f);
     }
@@ -3004,6 +3009,15 @@ static void step_rules(mar_follow *f, int have, uint32_t *flags)
                 f->silent_run = 0;
                 stop_search(f);
                 start_search(f, f->t + 1);
+            } else if (f->cue_pending) {
+                /* silence where the cue's line expects music, before the
+                 * cue has locked: no evidence of a stop at a place not yet
+                 * known; the search beside the cue, running since the
+                 * onset, decides (its gap rule sees a stop) */
+                f->cue_pending = f->cue_refine = 0;
+                f->state = MAR_FOLLOW_SEARCHING;
+                f->silent_run = 0;
+                start_search(f, f->cue_onset);
             } else {
                 pause_now(f);
             }
