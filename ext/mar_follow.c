@@ -2314,8 +2314,11 @@ static void run_search(mar_follow *f, uint32_t *flags)
         else
             e->p += e->r;
     }
-    if (f->ever && f->state != MAR_FOLLOW_SEARCHING && f->state != MAR_FOLLOW_WAITING) {
-        /* the tracker's own hypothesis competes as the "track" entry */
+    if (f->ever && f->state != MAR_FOLLOW_SEARCHING && f->state != MAR_FOLLOW_WAITING && !f->cue_pending) {
+        /* the tracker's own hypothesis competes as the "track" entry. Not
+         * a pending cue's: cue_fit judges that line, and beside it the
+         * search is an unknown start's (the entry took verifications and
+         * a wrong cue was found up to 0.42 s later: docs/music.md) */
         if (!tr) {
             for (int i = 0; i < POOL && !tr; i++)
                 if (!f->pool[i].used)

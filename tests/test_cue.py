@@ -113,10 +113,11 @@ def wrong_cue(styles, seed, later_s):
 
 
 def test_a_wrong_cue_is_refuted_without_a_false_lock():
-    """The search runs beside a pending cue from the onset: measured at
-    most 0.8 s later than from an unknown start (2.9 s when a fitting
-    measurement stopped that search until the cue was refuted at 2 s)."""
-    wrong_cue(("pop", "waltz", "techno"), 30, later_s=1.0)
+    """Beside a pending cue the search is an unknown start's: measured no
+    later than from an unknown start on these decks (0.8 s while the cue's
+    line took a place in its pool, 2.9 s when a fitting measurement stopped
+    it until the cue was refuted at 2 s)."""
+    wrong_cue(("pop", "waltz", "techno"), 30, later_s=0.5)
 
 
 @pytest.mark.xfail(strict=True, reason="known gap: in slow pads one deck locks 63 ms off after a "
