@@ -2009,6 +2009,16 @@ static int loud_at(const mar_follow *f, double p)
     return 0;
 }
 
+/* The cue is refuted: the search beside it, running since the onset
+ * (since the first frame), decides; the position runs on. */
+static void refute_cue(mar_follow *f)
+{
+    f->cue_pending = 0;
+    f->state = MAR_FOLLOW_SEARCHING;
+    f->doubt = f->probation = f->regaining = 0;
+    start_search(f, f->cue_onset);
+}
+
 /* After CUE_FIT_AT frames of music: the rate and offset on lines through
  * the cue that fit the live music best. Two clear fits in a row on the
  * same line lock; a sharp fit places the line; a fit from 2 s of music on
@@ -2084,10 +2094,7 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         mar_kf_init(&f->kf, 1.0, 4.0 / ((double)ages * (double)ages));  /* a tick over the fit, twice [1] */
     } else if (f->cue_fits > f->tk.cue_refute_fit && best < f->opt.track_threshold   /* NaN: flat */
                && loud_at(f, f->cue_from + (double)ages)) {
-        f->cue_pending = 0;                                     /* refuted */
-        f->state = MAR_FOLLOW_SEARCHING;
-        f->doubt = f->probation = f->regaining = 0;
-        start_search(f, f->cue_onset);                          /* running since the first frame */
+        refute_cue(f);
     }
 }
 
@@ -3015,12 +3022,10 @@ static void step_rules(mar_follow *f, int have, uint32_t *flags)
             } else if (f->cue_pending) {
                 /* silence where the cue's line expects music, before the
                  * cue has locked: no evidence of a stop at a place not yet
-                 * known; the search beside the cue, running since the
-                 * onset, decides (its gap rule sees a stop) */
-                f->cue_pending = f->cue_refine = 0;
-                f->state = MAR_FOLLOW_SEARCHING;
+                 * known; the cue is refuted (the search's gap rule sees a
+                 * real stop) */
+                refute_cue(f);
                 f->silent_run = 0;
-                start_search(f, f->cue_onset);
             } else {
                 pause_now(f);
             }
