@@ -292,6 +292,8 @@ struct mar_follow {
     double *lpos;               /* position estimate at that step [stored ticks] */
     double nf;                  /* noise floor estimate [dB]: quietest live frame of the last 20 s */
     double floor_min[FLOOR_BLOCKS];  /* per block, its quietest frame [dB] */
+    double tape_hiss;           /* the tape's hiss, its quietest frame heard while PAUSED, live minus
+                                 * gain [stored dB]; NAN: not heard yet */
     uint64_t floor_frames;      /* frames counted into the blocks */
 
     uint64_t t;                 /* steps done */
@@ -740,6 +742,7 @@ mar_follow *mar_follow_create_music(const mar_follow_options *opt, const mar_fol
     f->nf = INFINITY;
     for (int b = 0; b < FLOOR_BLOCKS; b++)
         f->floor_min[b] = INFINITY;
+    f->tape_hiss = NAN;
     mar_follow_reset(f, NAN);
     *status = 0;
     return f;
@@ -1366,6 +1369,26 @@ static void note_floor(mar_follow *f, double db)
     f->nf = nf;
 }
 
+/* The tape's hiss in stored terms (live minus gain) is its quietest frame
+ * heard while PAUSED. Nothing on a tape is quieter than its hiss, so a
+ * frame heard while following (the state of the last step) more than a
+ * hiss's wobble (STEADY_RANGE_DB) under it shows the volume knob turned
+ * down at least that much. The gain is measured on loud music only:
+ * without this, a knob turned down in a quiet passage left the gain high,
+ * the music expected over the floor, and its hiss read as a stop
+ * (waltz/pauses@20261122 stood 19 s while the tape played; docs/music.md). */
+static void hiss_shows_knob(mar_follow *f, double db)
+{
+    if (f->state == MAR_FOLLOW_PAUSED && f->have_gain)
+        f->tape_hiss = fmin(f->tape_hiss, db - f->gain);       /* (NAN: the first reading) */
+    if (!f->have_gain || isnan(f->tape_hiss)
+        || (f->state != MAR_FOLLOW_LOCKED && f->state != MAR_FOLLOW_HOLDING))
+        return;
+    double under = db - (f->tape_hiss + f->gain);      /* [dB] */
+    if (under < -STEADY_RANGE_DB)
+        f->gain += under + STEADY_RANGE_DB;          /* (not move_gain: this frame is the new floor) */
+}
+
 /* A frame's values are usable: loudness, onset (NaN: none) and bands
  * finite and >= 0. */
 static int valid_frame(const mar_follow_frame *fr)
@@ -1412,6 +1435,7 @@ static void take_frame(mar_follow *f, const mar_follow_frame *fr, uint32_t *flag
     }
     f->band.lvl_started |= bands;
     f->main = bands ? &f->band : &f->level;
+    hiss_shows_knob(f, db);
     note_floor(f, db);
     f->c.frames++;
     *have = 1;

@@ -325,6 +325,40 @@ def test_a_pause_in_a_quiet_passage_is_caught(piece, stored):
     assert resumed >= 5
 
 
+def test_a_volume_turned_down_in_a_passage_under_the_hiss_is_not_a_stop(piece):
+    """The music falls 30 dB, under the tape's hiss, for 8 s (taught 40-48
+    s of a copy of the piece), and the volume is turned 20-30 dB down over
+    2-3 s as it falls. The follower, started at its place, heard the hiss
+    in a short stop before; a live level under that hiss can only be the
+    knob, so the passage is no stop: never PAUSED in it, and within 0.1 s
+    of the place when the music returns. Eight random decks; before the
+    knob was read from the hiss, every one was taken for a stop 1.4-3.3 s
+    into the passage and stood 5-8 s behind by its end."""
+    quiet = (40.0, 48.0)                                       # the passage, taught [s]
+    x = piece.samples.copy()
+    x[int(quiet[0] * piece.sample_rate):int(quiet[1] * piece.sample_rate)] *= 10 ** (-30 / 20)
+    taught_quiet = loudness(x, piece.sample_rate)
+    rng = np.random.default_rng(20261207)
+    for case in range(8):
+        speed, start, stop = rng.uniform(0.96, 1.04), 25.0, (3.0, 1.5)   # [1], taught [s], live (at, for) [s]
+        fall = stop[0] + stop[1] + (quiet[0] - start - stop[0] * speed) / speed    # live [s]
+        rise = fall + (quiet[1] - quiet[0]) / speed                                # live [s]
+        turn = fall + rng.uniform(-0.5, 0.5)                                       # live [s]
+        deck = Deck(speed=speed, snr_db=20.0, sample_rate=11025, start=start, pauses=(stop,),
+                    gain_db=((0.0, 0.0), (turn, 0.0), (turn + rng.uniform(2.0, 3.0), -rng.uniform(20.0, 30.0))),
+                    seconds=rise + 3.0, seed=case)
+        played = play(x, piece.sample_rate, deck)
+        live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
+        f = Follower(taught_quiet)
+        f.reset(start / T)
+        track = f.run(live)
+        err = track.position * T - played.truth
+        t = np.arange(len(err)) * T
+        inside = (t > fall) & (t < rise)
+        assert not np.any(track.state[inside] == PAUSED), case
+        assert abs(err[int(rise / T)]) <= 0.1, case
+
+
 def test_a_stop_soon_after_a_volume_turn_is_caught(piece, stored):
     """The volume is turned 20 dB up or down over 2 s, and 0.5-6 s later
     the tape stops for 2-4 s. The turn may leave the place HOLDING (the
