@@ -10,6 +10,7 @@ Positions are compared in seconds of taught music; no timing assertions.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import shutil
@@ -337,6 +338,7 @@ def test_a_volume_turned_down_in_a_passage_under_the_hiss_is_not_a_stop(piece):
     quiet = (40.0, 48.0)                                       # the passage, taught [s]
     x = piece.samples.copy()
     x[int(quiet[0] * piece.sample_rate):int(quiet[1] * piece.sample_rate)] *= 10 ** (-30 / 20)
+    quiet_piece = dataclasses.replace(piece, samples=x)
     taught_quiet = loudness(x, piece.sample_rate)
     rng = np.random.default_rng(20261207)
     for case in range(8):
@@ -347,12 +349,7 @@ def test_a_volume_turned_down_in_a_passage_under_the_hiss_is_not_a_stop(piece):
         deck = Deck(speed=speed, snr_db=20.0, sample_rate=11025, start=start, pauses=(stop,),
                     gain_db=((0.0, 0.0), (turn, 0.0), (turn + rng.uniform(2.0, 3.0), -rng.uniform(20.0, 30.0))),
                     seconds=rise + 3.0, seed=case)
-        played = play(x, piece.sample_rate, deck)
-        live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
-        f = Follower(taught_quiet)
-        f.reset(start / T)
-        track = f.run(live)
-        err = track.position * T - played.truth
+        track, _, err, _ = live_track(quiet_piece, taught_quiet, deck, start=start / T)
         t = np.arange(len(err)) * T
         inside = (t > fall) & (t < rise)
         assert not np.any(track.state[inside] == PAUSED), case
