@@ -57,6 +57,25 @@ def test_quick_run_has_the_documented_keys(capsys, tmp_path):
     assert by_set["smooth", "top, unknown"]["targets"] == {}
 
 
+def without_cost(x):
+    """A result with the cost per tick (which depends on the machine's load) left out."""
+    if isinstance(x, dict):
+        return {k: without_cost(v) for k, v in x.items() if not k.startswith("us_per_tick")}
+    if isinstance(x, list):
+        return [without_cost(v) for v in x]
+    return x
+
+
+def test_decks_played_at_once_give_the_same_figures(quick_results):
+    """--jobs 2 plays the decks in two processes: every figure but the cost
+    per tick is the same as one after the other, deck by deck and in order."""
+    at_once = sync.collect(quick=True, seeds=1, jobs=2)
+    assert [r.pop("jobs") for r in at_once] == [2] * len(SETS)
+    one = json.dumps(without_cost(quick_results), default=float)
+    assert json.dumps(without_cost(at_once), default=float) == one
+    assert all(r["us_per_tick_median"] > 0 for r in at_once)
+
+
 def test_table_names_targets_and_machine(quick_results):
     out = sync.format_table(quick_results)
     assert "machine:" in out and "targets, synthesized pieces (smooth mode" in out

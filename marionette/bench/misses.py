@@ -31,9 +31,8 @@ from marionette.bench import sync as bs
 from marionette.cli.options import Number
 from marionette.music.bands import bands, fit_frames
 from marionette.music.feature import loudness, onsets
-from marionette.music.follower import Follower, sync_ticks
+from marionette.music.follower import Follower
 from marionette.sim.music import synthesize
-from marionette.sim.tape import play
 
 T = bs.T                         # tick period [s]
 MISS_S = 0.050                   # a tick further off than this is a miss [s]
@@ -99,15 +98,11 @@ def collect(seeds: int = bs.SEEDS, seed: int = bs.SEED, quick: bool = False, tra
         audible = bs.audible_from(stored)
         for s in range(seed, seed + seeds):
             for sc in cued_top_decks(durations, style, s, quick):
-                played = play(piece.samples, piece.sample_rate, sc.deck)
-                n = len(played.truth)
-                live = sync_ticks(loudness(played.samples, played.sample_rate))[:n]
-                live_bands = sync_ticks(fit_frames(bands(played.samples, played.sample_rate), len(live) - 1))
+                played, (live, live_onsets, live_bands) = bs.live_frames(piece, sc.deck)
                 follower = Follower(stored, mode=tracker, onset=stored_onsets, bands=stored_bands)
                 follower.cue(0.0)
-                track = follower.run(live, sync_ticks(onsets(played.samples, played.sample_rate))[:n],
-                                     bands=live_bands)
-                n = min(n, len(track.position))
+                track = follower.run(live, live_onsets, bands=live_bands)
+                n = min(len(played.truth), len(track.position))
                 t = np.arange(n) * T
                 err = np.abs(track.position[:n] * T - played.truth[:n])
                 measured = t >= bs.onset_of(played, audible) + bs.CUE_FROM_S

@@ -86,6 +86,10 @@ and run cued at the top (rows "wrong cue") and from an unknown start (rows
 - no_events: the figures over the target decks without a pause or a jump
   (what the cue alone does; the targets are checked over all target decks).
 
+`--jobs N` plays N decks at once, each in a forked process of its own;
+every figure but the cost per tick is the same as with one (the default),
+and the results then say "jobs".
+
 CUE_TARGETS hold for the "cue at top" rows, WRONG_CUE_TARGETS for the
 "wrong cue" rows; the unknown-start rows beside them have no targets.
 `--strict` exits 1 when a target fails, as in every bench (a target without
@@ -347,7 +351,7 @@ def check_targets(result: dict, targets=TARGETS) -> list[tuple[str, float, bool]
 
 def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED, progress=None,
             seeds: int = SEEDS, real: list | tuple = (), real_note: str = "",
-            use_bands: bool = True, tracker: str = "smooth") -> list[dict]:
+            use_bands: bool = True, tracker: str = "smooth", jobs: int = 1) -> list[dict]:
     """One result per mode (smooth, paper) with the documented keys, over
     the scenarios of seeds seed, seed + 1, ... (seeds of them), the
     follower on the band levels (use_bands, as a show made by teach) or on
@@ -357,7 +361,9 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
     ("unknown" for the first two). real: recordings.Recording, played as
     the synthesized pieces are; real_note: why some are missing (the
     table's note); tracker: the mode in the smooth mode's place ("model":
-    the tape deck model, issue 21)."""
+    the tape deck model, issue 21); jobs: decks played at once, each in a
+    process of its own (the figures do not depend on it, but the cost per
+    tick does when the processes outnumber the free cores)."""
     pieces = {}
     for style, s in (PIECES[:1] if quick else PIECES):
         pieces[style] = synthesize(style, seed=s)
@@ -366,10 +372,10 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
     if quick:                   # short pieces: the first 40 s
         pieces = {k: replace(p, samples=p.samples[:int(40 * p.sample_rate)]) for k, p in pieces.items()}
     stored = {k: loudness(p.samples, p.sample_rate) for k, p in pieces.items()}
-    stored_onsets = {k: onsets(p.samples, p.sample_rate) for k, p in pieces.items()}
-    stored_bands = {k: fit_frames(bands(p.samples, p.sample_rate), len(stored[k])) if use_bands else None
-                    for k, p in pieces.items()}
-    audible_s = {k: audible_from(v) for k, v in stored.items()}             # [s]
+    taught = _Taught(pieces, stored, {k: onsets(p.samples, p.sample_rate) for k, p in pieces.items()},
+                     {k: fit_frames(bands(p.samples, p.sample_rate), len(stored[k])) if use_bands else None
+                      for k, p in pieces.items()},
+                     {k: audible_from(v) for k, v in stored.items()}, use_bands, tracker)
     durations = {k: p.duration for k, p in pieces.items() if not k.startswith("real/")}
     real_durations = {k: p.duration for k, p in pieces.items() if k.startswith("real/")}
     runs, wrong = [], []
@@ -383,71 +389,25 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
                 if seeds > 1:
                     sc.name = f"{sc.name}@{s}"
                 group.append(sc)
-
-    def live_of(sc):
-        played = play(pieces[sc.piece].samples, pieces[sc.piece].sample_rate, sc.deck)
-        live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
-        live_onsets = sync_ticks(onsets(played.samples, played.sample_rate))[:len(played.truth)]
-        live_bands = None
-        if use_bands:
-            live_bands = sync_ticks(fit_frames(bands(played.samples, played.sample_rate), len(live) - 1))
-        return played, (live, live_onsets, live_bands)
-
-    def follow(sc, live, mode=tracker, cue=None):
-        follower = Follower(stored[sc.piece], mode=mode, onset=stored_onsets[sc.piece],
-                            bands=stored_bands[sc.piece])
-        if cue is not None:
-            follower.cue(cue)                                          # [stored ticks]
-        loud, live_onsets, live_bands = live
-        return follower.run(loud, live_onsets, timing=True, bands=live_bands)
-
-    def row(m, sc, played):
-        m.update(name=sc.name, piece=sc.piece, target=sc.target, real=sc.real, speed=sc.deck.speed,
-                 snr_db=sc.deck.snr_db,
-                 start_s=sc.deck.start, seconds=len(played.truth) * T,
-                 events=bool(sc.deck.pauses or sc.deck.jump))
-        return m
-
-    def every_tick(m, track, played):
-        m["ns"] = track.ns[:min(len(track.ns), len(played.truth))]      # [ns] of every tick
-        return m
-
+    tasks = ([("scenario", sc) for sc in runs] + [("top", sc) for sc in top_variants(runs)]
+             + [("wrong", sc) for sc in wrong])
     per_set: dict[tuple[str, str], list] = {(mode, start): [] for mode, start in (
         (tracker, "unknown"), ("paper", "unknown"), (tracker, "cue at top"), (tracker, "top, unknown"),
         (tracker, "wrong cue"), (tracker, "wrong cue, unknown"))}
-    for sc in runs:
-        t0 = time.perf_counter()
-        played, live = live_of(sc)
-        for mode in (tracker, "paper"):
-            track = follow(sc, live, mode)
-            per_set[mode, "unknown"].append(row(measure(track, played, track.ns), sc, played))
-        if progress:
-            progress(f"{sc.name}: {len(played.truth) * T:.0f} s of live audio, "
-                     f"{time.perf_counter() - t0:.1f} s")
-    for sc in top_variants(runs):
-        t0 = time.perf_counter()
-        played, live = live_of(sc)
-        onset = onset_of(played, audible_s[sc.piece])                   # [s]
-        for start, cue in (("cue at top", 0.0), ("top, unknown", None)):
-            track = follow(sc, live, cue=cue)
-            m = measure(track, played, None, from_s=onset + CUE_FROM_S, onset_s=onset)
-            per_set[tracker, start].append(row(every_tick(m, track, played), sc, played))
-        if progress:
-            progress(f"{sc.name} from the top, cued and not: {len(played.truth) * T:.0f} s of live "
-                     f"audio, {time.perf_counter() - t0:.1f} s")
-    for sc in wrong:
-        t0 = time.perf_counter()
-        played, live = live_of(sc)
-        track = follow(sc, live, cue=0.0)
-        cued = every_tick(measure(track, played), track, played)
-        track = follow(sc, live)
-        unknown = every_tick(measure(track, played), track, played)
-        cued["later_s"] = wrong_cue_later(cued, unknown)
-        per_set[tracker, "wrong cue"].append(row(cued, sc, played))
-        per_set[tracker, "wrong cue, unknown"].append(row(unknown, sc, played))
-        if progress:
-            progress(f"{sc.name} from {sc.deck.start:.1f} s, cued at the top and not: "
-                     f"{len(played.truth) * T:.0f} s of live audio, {time.perf_counter() - t0:.1f} s")
+    global _TAUGHT
+    _TAUGHT = taught                    # the workers' (forked) copy of what was taught
+    try:
+        if jobs > 1:
+            import multiprocessing
+            with multiprocessing.get_context("fork").Pool(jobs) as pool:
+                done = list(_report(pool.imap(_play_deck, tasks), progress))
+        else:
+            done = list(_report(map(_play_deck, tasks), progress))
+    finally:
+        _TAUGHT = None
+    for rows, _ in done:
+        for key, row in rows:
+            per_set[key].append(row)
     machine = machine_info()
     skipped = {"skipped": real_note or "no real recordings given"}
     results = []
@@ -463,8 +423,108 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
                              "snr_db": r["snr_db"], "start_s": r["start_s"], "seconds": r["seconds"],
                              "events": r["events"], **summarize([r])} for r in rows]
         res["machine"] = machine
+        if jobs > 1:
+            res["jobs"] = jobs
         results.append(res)
     return results
+
+
+@dataclass
+class _Taught:
+    """What collect() taught, per piece name: the pieces, their stored
+    loudness, onsets, band levels (None: on the loudness alone) and first
+    audible time [s]; and how to follow."""
+    pieces: dict
+    stored: dict
+    onsets: dict
+    bands: dict
+    audible_s: dict
+    use_bands: bool
+    tracker: str
+
+
+_TAUGHT: _Taught | None = None
+
+
+def _report(done, progress):
+    """Passes the decks' results through, telling progress each message."""
+    for rows, message in done:
+        if progress:
+            progress(message)
+        yield rows, message
+
+
+def _play_deck(task: tuple[str, Scenario]) -> tuple[list, str]:
+    """One deck of collect(): ("scenario", sc) both modes from an unknown
+    start, ("top", sc) its top variant cued at the top and not, ("wrong",
+    sc) a wrong-cue deck cued at the top and not. Returns ((set key, row)
+    pairs, a progress message)."""
+    kind, sc = task
+    t0 = time.perf_counter()
+    played, live = _live_of(sc)
+    seconds = len(played.truth) * T
+    out = []
+    if kind == "scenario":
+        for mode in (_TAUGHT.tracker, "paper"):
+            track = _follow(sc, live, mode)
+            out.append(((mode, "unknown"), _row(measure(track, played, track.ns), sc, played)))
+        message = f"{sc.name}: {seconds:.0f} s of live audio"
+    elif kind == "top":
+        onset = onset_of(played, _TAUGHT.audible_s[sc.piece])          # [s]
+        for start, cue in (("cue at top", 0.0), ("top, unknown", None)):
+            track = _follow(sc, live, _TAUGHT.tracker, cue)
+            m = measure(track, played, None, from_s=onset + CUE_FROM_S, onset_s=onset)
+            out.append(((_TAUGHT.tracker, start), _row(_every_tick(m, track, played), sc, played)))
+        message = f"{sc.name} from the top, cued and not: {seconds:.0f} s of live audio"
+    else:
+        track = _follow(sc, live, _TAUGHT.tracker, 0.0)
+        cued = _every_tick(measure(track, played), track, played)
+        track = _follow(sc, live, _TAUGHT.tracker)
+        unknown = _every_tick(measure(track, played), track, played)
+        cued["later_s"] = wrong_cue_later(cued, unknown)
+        out += [((_TAUGHT.tracker, "wrong cue"), _row(cued, sc, played)),
+                ((_TAUGHT.tracker, "wrong cue, unknown"), _row(unknown, sc, played))]
+        message = (f"{sc.name} from {sc.deck.start:.1f} s, cued at the top and not: "
+                   f"{seconds:.0f} s of live audio")
+    return out, f"{message}, {time.perf_counter() - t0:.1f} s"
+
+
+def live_frames(piece, deck: Deck, use_bands: bool = True):
+    """The deck's recording of the piece and its live frames, tick k holding
+    frame k - 1 as in the engine: (played, (loudness, onsets, band levels or
+    None))."""
+    played = play(piece.samples, piece.sample_rate, deck)
+    live = sync_ticks(loudness(played.samples, played.sample_rate))[:len(played.truth)]
+    live_onsets = sync_ticks(onsets(played.samples, played.sample_rate))[:len(played.truth)]
+    live_bands = None
+    if use_bands:
+        live_bands = sync_ticks(fit_frames(bands(played.samples, played.sample_rate), len(live) - 1))
+    return played, (live, live_onsets, live_bands)
+
+
+def _live_of(sc: Scenario):
+    return live_frames(_TAUGHT.pieces[sc.piece], sc.deck, _TAUGHT.use_bands)
+
+
+def _follow(sc: Scenario, live, mode: str, cue=None):
+    follower = Follower(_TAUGHT.stored[sc.piece], mode=mode, onset=_TAUGHT.onsets[sc.piece],
+                        bands=_TAUGHT.bands[sc.piece])
+    if cue is not None:
+        follower.cue(cue)                                              # [stored ticks]
+    loud, live_onsets, live_bands = live
+    return follower.run(loud, live_onsets, timing=True, bands=live_bands)
+
+
+def _row(m: dict, sc: Scenario, played) -> dict:
+    m.update(name=sc.name, piece=sc.piece, target=sc.target, real=sc.real, speed=sc.deck.speed,
+             snr_db=sc.deck.snr_db, start_s=sc.deck.start, seconds=len(played.truth) * T,
+             events=bool(sc.deck.pauses or sc.deck.jump))
+    return m
+
+
+def _every_tick(m: dict, track, played) -> dict:
+    m["ns"] = track.ns[:min(len(track.ns), len(played.truth))]          # [ns] of every tick
+    return m
 
 
 def figures(rows: list[dict], targets) -> dict:
@@ -691,6 +751,10 @@ def register(sub) -> None:
     parser.add_argument("--model", action="store_true",
                         help="the tape deck model (follow mode 'model', experimental) in the smooth "
                              "mode's place")
+    parser.add_argument("--jobs", type=Number(int, 1), default=1, metavar="N",
+                        help="decks played at once, each in a process of its own (default 1); the "
+                             "figures do not depend on it, the cost per tick does when N exceeds the "
+                             "free cores")
     parser.add_argument("--music-dir", action="append", metavar="DIR",
                         help=f"real recordings (.ogg/.wav/.flac) from DIR, repeatable (default: "
                              f"${recordings.ENV}, else {', '.join(recordings.DEFAULT_DIRS)})")
@@ -702,7 +766,8 @@ def run(args) -> int:
     if progress:
         progress(f"real recordings: {', '.join(r.name for r in real) or 'none'}" + (f" ({note})" if note else ""))
     results = collect(args.seconds, args.quick, args.seed, progress, 1 if args.quick else args.seeds, real, note,
-                      use_bands=not args.loudness_only, tracker="model" if args.model else "smooth")
+                      use_bands=not args.loudness_only, tracker="model" if args.model else "smooth",
+                      jobs=args.jobs)
     if args.json:
         json.dump(results, sys.stdout, indent=2, default=float)
         sys.stdout.write("\n")
