@@ -98,6 +98,7 @@ runs to measure it fails: runs that vanish are a fault).
 from __future__ import annotations
 
 import json
+import multiprocessing
 import sys
 import time
 from dataclasses import dataclass, replace
@@ -398,7 +399,6 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
     _TAUGHT = taught                    # the workers' (forked) copy of what was taught
     try:
         if jobs > 1:
-            import multiprocessing
             with multiprocessing.get_context("fork").Pool(jobs) as pool:
                 done = list(_report(pool.imap(_play_deck, tasks), progress))
         else:
