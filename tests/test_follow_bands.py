@@ -12,10 +12,9 @@ import math
 import numpy as np
 import pytest
 
-from marionette.music.bands import bands, fit_frames
-from marionette.music.feature import loudness, onsets
-from marionette.music.follower import STATES, FollowError, Follower, sync_ticks
-from marionette.sim.tape import Deck, play
+from marionette.bench import sync
+from marionette.music.follower import STATES, FollowError, Follower
+from marionette.sim.tape import Deck
 from taught_music import taught
 
 T = 0.020                                            # tick [s]
@@ -27,12 +26,10 @@ WRONG_LATER_S = 0.5             # a wrong cue's place found this much later than
 
 
 def live_frames(piece, deck):
-    """The deck's recording as the tick hears it: loudness, onsets, band levels, truth [s]."""
-    played = play(piece.samples, piece.sample_rate, deck)
-    n = len(played.truth)
-    loud = sync_ticks(loudness(played.samples, played.sample_rate))[:n]
-    rows = sync_ticks(fit_frames(bands(played.samples, played.sample_rate), len(loud) - 1))
-    return loud, sync_ticks(onsets(played.samples, played.sample_rate))[:n], rows, played.truth
+    """The deck's recording as the tick hears it (as bench sync plays it):
+    loudness, onsets, band levels, truth [s]."""
+    played, (loud, live_onsets, rows) = sync.live_frames(piece, deck)
+    return loud, live_onsets, rows, played.truth
 
 
 def cued_run(style, seed, deck, use_bands, live_bands=True, cue=0.0):

@@ -405,7 +405,7 @@ def collect(seconds: float | None = None, quick: bool = False, seed: int = SEED,
             done = list(_report(map(_play_deck, tasks), progress))
     finally:
         _TAUGHT = None
-    for rows, _ in done:
+    for rows in done:
         for key, row in rows:
             per_set[key].append(row)
     machine = machine_info()
@@ -447,11 +447,11 @@ _TAUGHT: _Taught | None = None
 
 
 def _report(done, progress):
-    """Passes the decks' results through, telling progress each message."""
+    """The decks' rows, telling progress each deck's message."""
     for rows, message in done:
         if progress:
             progress(message)
-        yield rows, message
+        yield rows
 
 
 def _play_deck(task: tuple[str, Scenario]) -> tuple[list, str]:
