@@ -123,6 +123,7 @@
 #define LOUD_DB 15.0            /* stored frames within this of the stored level are loud: they count for the gain,
                                  * and only where they are heard may a cue be refuted [dB] */
 #define GAIN_STEP 25.0          /* the gain estimate moves at most this fast [dB/s] */
+#define GAIN_PRIOR 1.0          /* a lock's gain: the gain before it weighs as this much loud music [s] */
 #define GAIN_ALPHA 0.1          /* live-minus-stored gain estimate smoothing per REF_PERIOD [1] */
 #define GAIN_SLOW_ALPHA 0.02    /* ... and its slow twin's (a time constant of 1 s) [1] */
 #define TURNING_DB 2.0          /* the two this far apart: the volume knob is turning [dB] */
@@ -139,7 +140,9 @@
 #define STEADY_RANGE_DB 3.0     /* a pause's frames stay within this range (hiss), music moves more [dB] */
 #define H_SLOW 0.003            /* tracking peak height: long-run average, per measurement and REF_PERIOD [1] */
 #define H_FAST 0.1              /* ... short-run average, per measured (not quiet) REF_PERIOD [1] */
-#define DOUBT_DROP 0.25         /* short-run height this far under the long-run one: doubt the place [1] */
+#define DOUBT_DROP 0.25         /* short-run height this far under the long-run one: doubt the place, at most [1] */
+#define DOUBT_DROP_MIN 0.1      /* ... at least [1] */
+#define DOUBT_SIGMAS 4.0        /* ... else this many of the heights' own long-run deviations [1] */
 #define CLEAR_DB 15.0           /* doubt only where the live music averages this far over the noise floor [dB] */
 #define NEUTRAL_DB 1.0          /* a frame within this of a silent run's level range ... */
 #define REGAIN_S 0.5            /* measurements in a row for this long end a hold with the search beside [s] */
@@ -260,6 +263,7 @@ typedef struct {
     size_t cue_fit_at[CUE_FITS];  /* [ticks] */
     int cue_refute_fit;           /* the first fit (index) that may refute the cue when nothing fits */
     double level_release, gain_step;    /* [dB per tick] */
+    double gain_prior;          /* [ticks] */
     double gain_alpha, gain_slow_alpha, pause_alpha, h_fast, h_slow;   /* smoothing per tick [1] */
     /* the model's */
     double stop_hazard, start_hazard;  /* P(the deck stops, starts) per tick [1] */
@@ -312,6 +316,7 @@ struct mar_follow {
     double gain;                /* live minus stored level [dB] */
     double gain_slow;           /* ... followed slowly: the knob turns while the two differ [dB] */
     int have_gain;
+    double gain_heard;          /* loud frames the gain was fitted to since the last stop [frames] */
     uint64_t silent_run;
     uint64_t silent_start;      /* step of the first frame of the current silent run */
     double frozen;              /* position held in a pause [stored ticks] */
@@ -322,6 +327,8 @@ struct mar_follow {
     double silent_lo, silent_hi;  /* level range of the current silent run [dB] */
     double pause_dev;           /* the silence's mean frame-to-frame deviation in a pause [dB] */
     double h_slow, h_fast;      /* tracking peak heights: long-run, short-run average [1] */
+    double h_var;               /* the heights' long-run variance about h_slow [1] */
+    uint64_t h_low_since;       /* 1 + the step where the current run of low heights began; 0: none */
     int doubt;                  /* the tracking correlation collapsed in music: search beside, keep it going */
     int regaining;              /* the tracking went bad long enough to start the search beside: ... */
     uint64_t regain_ok;         /* ... not LOCKED again until this many measurements in a row fit, */
@@ -488,6 +495,7 @@ static int tick_options_of(const mar_follow_options *o, tick_options *tk, const 
     }
     tk->level_release = LEVEL_RELEASE * T;
     tk->gain_step = GAIN_STEP * T;
+    tk->gain_prior = ticks_of(GAIN_PRIOR, T);
     tk->gain_alpha = per_tick(GAIN_ALPHA, T);
     tk->gain_slow_alpha = per_tick(GAIN_SLOW_ALPHA, T);
     tk->pause_alpha = per_tick(PAUSE_ALPHA, T);
@@ -764,6 +772,20 @@ void mar_follow_destroy(mar_follow *f)
     free(f);
 }
 
+/* The heights' spread starts from what a usual fit shows. */
+static void heights_afresh(mar_follow *f)
+{
+    f->h_var = (DOUBT_DROP / DOUBT_SIGMAS) * (DOUBT_DROP / DOUBT_SIGMAS);
+    f->h_low_since = 0;
+}
+
+/* How far the short-run height must fall under the long-run one to doubt
+ * the place [1]: a steady fit is doubted sooner than one that wavers. */
+static double doubt_drop(const mar_follow *f)
+{
+    return fmin(DOUBT_DROP, fmax(DOUBT_DROP_MIN, DOUBT_SIGMAS * sqrt(f->h_var)));
+}
+
 static void clear_pool(mar_follow *f)
 {
     memset(f->pool, 0, sizeof f->pool);
@@ -816,6 +838,7 @@ void mar_follow_reset(mar_follow *f, double position)
     f->doubt = f->probation = f->near = f->regaining = f->unproven = 0;
     f->gap_run = 0;
     f->h_slow = f->h_fast = 0.0;
+    heights_afresh(f);
     model_follow_afresh(f, isfinite(position));     /* a known start (a seek) is given */
     f->stop_run = f->play_run = f->t + 1;
     f->rho_usual = NAN;
@@ -1623,8 +1646,9 @@ static int detect_pause(mar_follow *f, int have)
 }
 
 /* Live minus stored level [dB] on the line (p, r), over loud stored frames:
- * from the last `ages` frames when starting, then smoothed frame by frame. */
-static void update_gain(mar_follow *f, double p, double r, size_t ages)
+ * from the last `ages` frames when starting, then smoothed frame by frame.
+ * Returns the number of loud frames it heard. */
+static size_t update_gain(mar_follow *f, double p, double r, size_t ages)
 {
     ages = usable(f, f->seg_start, ages);
     double sum = 0.0;
@@ -1636,20 +1660,23 @@ static void update_gain(mar_follow *f, double p, double r, size_t ages)
             sum += db - s, cnt++;
     }
     if (!cnt)
-        return;
+        return 0;
     if (!f->have_gain) {
         f->gain = f->gain_slow = sum / (double)cnt;
         f->have_gain = 1;
+        f->gain_heard = (double)cnt;
     } else {
         /* a frame far below is a dropout or a pause, not the volume knob; and
          * the knob turns slowly: at most GAIN_STEP */
         double diff = sum / (double)cnt - f->gain;
         if (diff > -LOW_DB) {
+            f->gain_heard += (double)cnt;
             double step = fmax(-f->tk.gain_step, fmin(f->tk.gain_step, f->tk.gain_alpha * diff));
             move_gain(f, step);
         }
         f->gain_slow += f->tk.gain_slow_alpha * (f->gain - f->gain_slow);
     }
+    return cnt;
 }
 
 /* One lag measurement d [ticks], c ticks in the past, into the filter: its
@@ -1701,6 +1728,11 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
     }
     double d = mar_corr_peak(rho, lags, &h, &kappa, &edge);
     f->h_fast += f->tk.h_fast * (h - f->h_fast);
+    /* where the heights began to fall: a doubt's search hears from there */
+    if (h >= f->h_slow - 0.5 * doubt_drop(f))
+        f->h_low_since = 0;
+    else if (!f->h_low_since)
+        f->h_low_since = f->t + 1;
     if (edge || h < f->opt.track_threshold || !(kappa > 0.0))
         return 0;
     /* With onsets, the onset feature's lag too: rises survive a room's
@@ -1739,7 +1771,12 @@ static int track_smooth(mar_follow *f, int *quiet, uint32_t *flags)
         used |= lag_update(f, c2, d2 - ((f->kf.p - p0) - c2 * (f->kf.r - r0)), kappa2, share);
     if (!used)
         return 0;
-    f->h_slow += f->tk.h_slow * (h - f->h_slow);
+    /* the long run learns from the usual fit, not from a collapse */
+    double dh = h - f->h_slow;
+    if (dh >= -doubt_drop(f)) {
+        f->h_slow += f->tk.h_slow * dh;
+        f->h_var += f->tk.h_slow * (dh * dh - f->h_var);
+    }
     double qual = (h - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->conf += 0.05 * (qual - f->conf);
     *flags |= MAR_FOLLOW_F_MEASURED;
@@ -1819,8 +1856,18 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->measured = 0;
     f->doubt = f->probation = f->regaining = f->unproven = f->cue_pending = f->cue_refine = 0;
     f->h_slow = f->h_fast = e->fine;
+    heights_afresh(f);
+    /* a broadband level gives each section of the music its own gain (a
+     * room's or speaker's colouring, 3 dB apart on the pop piece), and a
+     * lock's window may hold a few frames of one section: the gain heard
+     * before, from the music followed, weighs in as GAIN_PRIOR of it */
+    double before = f->have_gain && was_following ? f->gain : NAN, heard = fmin(f->gain_heard, f->tk.gain_prior);
     f->have_gain = 0;
-    update_gain(f, f->kf.p, f->kf.r, f->tk.verify_window);
+    size_t loud = update_gain(f, f->kf.p, f->kf.r, f->tk.verify_window);
+    if (!isnan(before) && f->have_gain) {
+        double w = (double)loud / ((double)loud + heard);
+        f->gain = f->gain_slow = before + w * (f->gain - before);
+    }
     if (!was_following || fabs(old - f->kf.p) > 2.0)
         *flags |= MAR_FOLLOW_F_JUMP;
     f->c.locks++;
@@ -2106,6 +2153,7 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         f->bad_since = 0;
         f->conf = (best - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
         f->h_slow = f->h_fast = best;
+        heights_afresh(f);
         f->c.locks++;
         *flags |= MAR_FOLLOW_F_MEASURED;
     } else if (best >= f->opt.track_threshold && sharp) {
@@ -2455,6 +2503,7 @@ static uint64_t stop_step(const mar_follow *f, uint64_t oldest)
 /* The recorder stopped: back to where it stopped, and hold there. */
 static void pause_now(mar_follow *f)
 {
+    f->gain_heard = 0.0;                              /* the knob may turn unheard while stopped */
     uint64_t oldest = f->t + 1 > f->hcap - 1 ? f->t + 2 - f->hcap : 0;
     if (oldest < f->seg_start)
         oldest = f->seg_start;
@@ -2640,11 +2689,14 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
      * may have jumped to a place that resembles this one (the same drums):
      * doubt the place, and let the search (with this place in its pool)
      * decide; only a lock ends the doubt */
-    if (!f->doubt && f->measured && !quiet && f->h_fast < f->h_slow - DOUBT_DROP && clear_music(f)
+    if (!f->doubt && f->measured && !quiet && f->h_fast < f->h_slow - doubt_drop(f) && clear_music(f)
         && f->silent_run == 0) {
         f->doubt = 1;
         uint64_t back = f->tk.window / 2;
-        start_search(f, f->t + 1 > back ? f->t + 1 - back : 0);
+        uint64_t from = f->t + 1 > back ? f->t + 1 - back : 0;
+        if (f->h_low_since && f->h_low_since - 1 > from)
+            from = f->h_low_since - 1;
+        start_search(f, from);
     }
     /* after a resume, the place is on probation until the near search has
      * locked (which ends it) or given up and the tracker has confirmed the
