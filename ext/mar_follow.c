@@ -2718,8 +2718,13 @@ static void follow(mar_follow *f, int have, uint32_t *flags)
         uint64_t at = f->probation && f->seg_start > from ? f->seg_start : from;
         f->state = MAR_FOLLOW_SEARCHING;
         f->probation = f->doubt = f->regaining = 0;
-        stop_search(f);
-        start_search(f, at);
+        /* beside a pending cue the search is an unknown start's, listening
+         * from the first frame: started afresh here, it found a wrong cue's
+         * place up to 0.14 s later than from an unknown start */
+        if (!f->cue_pending) {
+            stop_search(f);
+            start_search(f, at);
+        }
     } else if ((double)f->bad_since >= f->tk.search_after) {
         start_search(f, from);
         if (!f->regaining)
