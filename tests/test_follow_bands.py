@@ -179,8 +179,6 @@ def test_bad_bands_are_refused():
     assert out.flags & 1 and f.counters()["bad_input"] == 1
 
 
-
-
 def test_a_jump_into_resembling_music_is_doubted_soon():
     """Cued at the top, six random tapes (0.94-1.06) jump at 27.75 s from
     26-29 s in the pop piece back to 6.8 s, into music much like where they
