@@ -482,8 +482,13 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
         double arrive = e->position + e->rate * e->move_duration / T;
         plan_moves(e, MAR_REQ_BLEND, 1, arrive < last ? arrive : last);
     }
+    /* a GOTO's profile runs a period per tick: after missed periods its
+     * commands go on from where they were, each step within the limits,
+     * and reach the pose later (in wall time, the profile ran ahead of
+     * the limited commands and the hold stood short of the pose). A stop's
+     * profile runs with the drives' time, a blend's with the music's */
     if (e->mode == MAR_MODE_MOVE)
-        e->move_time += T * (double)elapsed_periods;
+        e->move_time += T * (double)(e->move_kind == MAR_REQ_GOTO ? 1 : elapsed_periods);
     /* following, the show is sampled at a clock that follows the music
      * smoothly while it plays on; moves, holds and seeks set it. The
      * paper's mode doubles and skips samples as the paper did */

@@ -706,6 +706,76 @@ static void test_clock(void)
           pos - k.position);
 }
 
+/* Overruns (periods elapsed between ticks) while a GOTO moves: its
+ * profile runs a period per tick, so its commands are those of the same
+ * move without overruns, later (run in wall time, the profile ended
+ * before the limited commands arrived and the hold stood short: a "home"
+ * under load stopped short of home). Random axes and poses, one engine
+ * ticking a period at a time and one missing up to 3 periods per tick
+ * for the first 6 s: every command within the limits, at most a tick's
+ * worth of speed apart, and the same commands tick by tick. */
+static void test_moves_arrive_after_overruns(int cases)
+{
+    enum { AXES = 3, TICKS = 4, RUN = 1200, OVERRUN = 300 };   /* 24 s: the slowest move needs 16 s */
+    for (int c = 0; c < cases; c++) {
+        mar_axis axes[AXES];
+        double show[AXES * TICKS], loud[TICKS] = {0.0}, pose[AXES];
+        for (int j = 0; j < AXES; j++) {
+            double lo = uniform(-2, 0), hi = lo + uniform(0.5, 3);
+            axes[j] = (mar_axis){
+                .limits = { lo, hi, uniform(0.2, 3), uniform(1, 20) },
+                .dead_time = uniform(0, 0.1), .time_constant = uniform(0, 0.2),
+                .start = uniform(lo, hi),
+                .address = { (uint8_t)j, 0, 1000.0, 0.0 },
+            };
+            for (int k = 0; k < TICKS; k++)
+                show[j * TICKS + k] = axes[j].start;
+            pose[j] = uniform(lo, hi);
+        }
+        mar_engine_options opt = { .period = 0.02, .record_slots = RUN, .loudness_slots = 16, .start_holding = 1 };
+        unsigned char *rec[2] = {NULL, NULL};
+        size_t rs = 0, n[2] = {0, 0};
+        int64_t missed[OVERRUN];
+        for (int k = 0; k < OVERRUN; k++)
+            missed[k] = (int64_t)uniform(0, 4);                      /* periods missed before tick k */
+        for (int run = 0; run < 2; run++) {
+            int status;
+            mar_engine *e = mar_engine_create(&opt, axes, AXES, show, TICKS, loud, NULL, &status);
+            CHECK(e != NULL, "create failed: %d", status);
+            if (!e)
+                break;
+            rs = mar_engine_record_size(e);
+            rec[run] = malloc(rs * RUN);
+            mar_engine_request(e, MAR_REQ_GOTO, pose, c % 2);
+            int64_t periods = 0;
+            for (int k = 0; k < RUN; k++) {
+                int64_t elapsed = 1 + (run && k < OVERRUN ? missed[k] : 0);
+                periods += elapsed;
+                mar_engine_tick(e, periods * 20000000, elapsed);
+            }
+            n[run] = mar_engine_drain_records(e, rec[run], RUN);
+            CHECK(n[run] == RUN, "recorded %zu of %d ticks", n[run], RUN);
+            mar_engine_destroy(e);
+        }
+        for (int j = 0; j < AXES && n[0] == RUN && n[1] == RUN; j++) {
+            const mar_limits *l = &axes[j].limits;
+            double prev = axes[j].start, tol = 1e-9 * (1.0 + fabs(l->pos_max) + fabs(l->pos_min));
+            for (size_t k = 0; k < RUN; k++) {
+                double x = ((const double *)(rec[1] + k * rs + sizeof(mar_record)))[j];
+                double x0 = ((const double *)(rec[0] + k * rs + sizeof(mar_record)))[j];
+                CHECK(x >= l->pos_min - tol && x <= l->pos_max + tol, "case %d tick %zu axis %d: %g outside", c, k, j, x);
+                CHECK(fabs(x - prev) <= l->max_speed * 0.02 * (1 + 1e-9) + 1e-12,
+                      "case %d tick %zu axis %d: step %g over a tick's worth", c, k, j, x - prev);
+                CHECK(fabs(x - x0) <= tol, "case %d tick %zu axis %d: %.9g with overruns, %.9g without",
+                      c, k, j, x, x0);
+                prev = x;
+            }
+        }
+        free(rec[0]);
+        free(rec[1]);
+    }
+}
+
 int main(void)
 {
     signal(SIGPIPE, SIG_IGN);
@@ -718,6 +788,7 @@ int main(void)
     test_ring_and_hist();
     test_rtloop();
     test_clock();
+    test_moves_arrive_after_overruns(100);
     if (failures) {
         fprintf(stderr, "%d checks failed\n", failures);
         return 1;
