@@ -69,30 +69,43 @@ def test_both_limits_alike_stop_dead_and_are_left_at_once():
     """Driven into either limit (and mirrored, the other), with or without
     acceleration clipping: no velocity out of the range while clipped, and
     after a command back the axis leaves the limit after its dead time, the
-    same step at both limits."""
+    same step at both limits. The 40 cases' 80 drives run side by side as
+    the channels of one model per clipping mode (the model is vectorised
+    over channels, each with its own limits, dead time and lag): each one
+    steps as it would alone."""
     rng = np.random.default_rng(20261201)
+    drives = {False: [], True: []}      # clip -> [(case, side, axis, edge, sign, command)]
     for case in range(40):
         clip = bool(case % 2)
         lo, hi = rng.uniform(-2, 0.5), rng.uniform(0.6, 3)
         config = make_figure(1, min=lo, max=hi, home=(lo + hi) / 2, max_speed=rng.uniform(0.3, 3),
                              max_accel=rng.uniform(1, 30), dead_time=rng.uniform(0.01, 0.1),
                              time_constant=rng.uniform(0.01, 0.2))
-        left = {}
         for side, edge, sign in (("upper", hi, 1.0), ("lower", lo, -1.0)):
-            m = ServoModel(config.axes, T, clip_accel=clip)
-            m.set_command([edge + sign * rng.uniform(0.1, 1)])
-            for _ in range(4000):
-                m.advance(0.001)
-                if m.position[0] == edge:
-                    assert sign * m.velocity[0] <= 0, (case, side, m.velocity)
-            assert m.position[0] == edge, (case, side)
-            m.set_command([edge - sign * 0.3 * (hi - lo)])
-            for k in range(1, 1000):
-                m.advance(0.001)
-                if m.position[0] != edge:
-                    left[side] = k
-                    break
-        assert left["upper"] == left["lower"] <= m.delay_steps[0] + 1, (case, left)
+            drives[clip].append((case, side, config.axes[0], edge, sign,
+                                 edge + sign * rng.uniform(0.1, 1), edge - sign * 0.3 * (hi - lo)))
+    for clip, rows in drives.items():
+        cases, sides, axes, edge, sign, into, back = zip(*rows)
+        edge, sign = np.array(edge), np.array(sign)
+        m = ServoModel(axes, T, clip_accel=clip)
+        m.set_command(into)
+        for _ in range(4000):
+            m.advance(0.001)
+            at = m.position == edge
+            bad = at & (sign * m.velocity > 0)
+            assert not bad.any(), [(cases[j], sides[j], m.velocity[j]) for j in np.flatnonzero(bad)]
+        assert np.all(m.position == edge), [(cases[j], sides[j]) for j in np.flatnonzero(m.position != edge)]
+        m.set_command(back)
+        left = np.zeros(len(rows), dtype=int)           # fine steps until each leaves its limit
+        for k in range(1, 1000):
+            m.advance(0.001)
+            left[(left == 0) & (m.position != edge)] = k
+            if left.all():
+                break
+        for j in range(0, len(rows), 2):                # (upper, lower) of one case
+            assert sides[j:j + 2] == ("upper", "lower")
+            assert 0 < left[j] == left[j + 1] <= m.delay_steps[j] + 1, \
+                (cases[j], {"upper": left[j], "lower": left[j + 1]})
 
 
 def test_without_acceleration_clipping_a_jump_shows_in_the_peak():
