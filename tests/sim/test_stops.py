@@ -15,9 +15,13 @@ watchdog trip, mid-motion: the same stop point, from where each drive is
 when the node brakes, the same 1 %, and the same acceleration bound: the
 braking itself adds nothing to the commands' rounding (SPEC.md 6, Quick
 stop)."""
+import multiprocessing
+import os
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from marionette import protocol
 from marionette.config import load_config
@@ -57,22 +61,44 @@ def random_show(config, rng, ticks):
                 positions=out, loudness=np.zeros(ticks), tick_period=config.tick_period)
 
 
-def drive(config, engine, sim, ticks, on_tick, on_step=lambda step: None, silent_from=None):
+@pytest.fixture(scope="module")
+def run_all():
+    """run_all(f, cases): [f(case) for case in cases], in worker processes
+    (one per CPU, at most 4). Each case is drawn in full, in order, from the
+    test's seed before any runs, and runs on its own simulator and engine,
+    so the results are those of running them one after another."""
+    workers = min(4, len(os.sched_getaffinity(0)))
+    if workers < 2:
+        yield lambda f, cases: [f(case) for case in cases]
+        return
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        yield lambda f, cases: list(pool.map(f, cases))
+
+
+def drive(config, engine, sim, ticks, on_tick, at_step=None, silent_from=None):
     """Runs the engine in step mode into sim (all on one virtual clock) for
-    ticks ticks, calling on_tick(k) before tick k and on_step(n) once the
-    drives are at fine step n; from tick silent_from on the host sends
-    nothing. Returns the drives' positions at every fine step from model
-    time 0 [unit] (steps x axes)."""
+    ticks ticks, calling on_tick(k) before tick k and, with at_step = (n,
+    act), act() once the drives are at fine step n; from tick silent_from on
+    the host sends nothing. Returns the drives' positions at every fine step
+    from model time 0 [unit] (steps x axes). The drives run a tick (or up
+    to step n) at a time, and the positions of its fine steps are read from
+    the model's ring of its last two ticks' (ServoModel._past, where its
+    peak_accel is measured): the same steps as advancing one at a time."""
     T = config.tick_period
     model = next(iter(sim.nodes.values())).model
     per_tick = model.sample_steps
-    fine = [sim.positions()]
+    cols = [j for _, j in sim._where]                                   # all on one node
+    back = np.arange(per_tick - 1, -1, -1)                              # [fine steps]
+    fine = [sim.positions()[None]]
     for k in range(ticks):
-        for i in range(1, per_tick + 1 if k else 1):                    # the drives up to tick k
-            step = (k - 1) * per_tick + i
-            sim.advance_to(step * model.step)
-            on_step(step)
-            fine.append(sim.positions())
+        if k:                                                           # the drives up to tick k
+            end = k * per_tick                                          # [fine steps]
+            if at_step is not None and end - per_tick < at_step[0] <= end:
+                sim.advance_to(at_step[0] * model.step)
+                at_step[1]()
+            sim.advance_to(end * model.step)
+            assert model._steps == end
+            fine.append(model._past[(end - back) % len(model._past)][:, cols])
         on_tick(k)
         engine.step(1)
         if silent_from is not None and k >= silent_from:
@@ -81,7 +107,7 @@ def drive(config, engine, sim, ticks, on_tick, on_step=lambda step: None, silent
         entries = [(a.node, a.channel, int(round(a.offset + a.scale * c))) for a, c in zip(config.axes, cmd)]
         sim.handle(protocol.Sync(k), k * T)
         sim.handle(protocol.Setpoints(k, entries), k * T)
-    return np.array(fine)
+    return np.concatenate(fine)
 
 
 def physical_stop(config, sim, fine, stop_tick):
@@ -141,29 +167,41 @@ def stop_figures(config, sim, after, v, stop):
 
 
 def motion(config, rng, kind):
-    """The motion a stop interrupts: a random dance ('dance'), or a move from
-    home to a far random pose ('move', near top speed at the stop). Returns
-    (the engine, the tick to stop at, {tick: request to make before it})."""
+    """The motion a stop interrupts, drawn: a random dance ('dance'), or a
+    move from home to a far random pose ('move', near top speed at the
+    stop). Returns (the show, the tick to stop at, the move's pose or None);
+    make_engine() makes its engine."""
     if kind == "dance":
         show = random_show(config, rng, 160 + SETTLE)
         stop_tick = int(rng.integers(60, 160))
-        engine = Engine(config, show)
-        request = {}
+        pose = None
     else:
         show = random_show(config, rng, 2)
         stop_tick = int(rng.integers(12, 30))
-        engine = Engine(config, show, start_pose="home")
         pose = {a.name: float(rng.choice([a.min, a.max]) * 0.9 + 0.1 * a.home) for a in config.axes}
-        request = {0: lambda: engine.move_to(pose)}
-    return engine, stop_tick, request
+    return show, stop_tick, pose
+
+
+def make_engine(config, show, pose):
+    """motion()'s engine: (the engine, {tick: request to make before it})."""
+    if pose is None:
+        return Engine(config, show), {}
+    engine = Engine(config, show, start_pose="home")
+    return engine, {0: lambda: engine.move_to(pose)}
 
 
 def stop_case(config, rng, kind):
     """One engine stop mid-motion (motion(): a dance, or a move stopped near
-    top speed); its stop_figures."""
+    top speed), drawn; run_stop_case runs it."""
+    return config, motion(config, rng, kind)
+
+
+def run_stop_case(case):
+    """stop_case's stop run: its stop_figures."""
+    config, (show, stop_tick, pose) = case
     sim = SimFigure(config, clip_accel=False)
     sim.advance_to(0.0)
-    engine, stop_tick, request = motion(config, rng, kind)
+    engine, request = make_engine(config, show, pose)
     request[stop_tick] = engine.stop_motion
     with engine:
         fine = drive(config, engine, sim, stop_tick + SETTLE, lambda k: request.get(k, lambda: None)())
@@ -171,11 +209,11 @@ def stop_case(config, rng, kind):
     return stop_figures(config, sim, fine[at.min():], v, stop)
 
 
-def test_stop_ramps_brake_the_drives_to_their_own_stop_point():
+def test_stop_ramps_brake_the_drives_to_their_own_stop_point(run_all):
     """Over 24 random stops of each kind (16 axes each), fixed seed."""
     config = figure()
     rng = np.random.default_rng(19)
-    results = [stop_case(config, rng, kind) for kind in ("dance", "move") for _ in range(24)]
+    results = run_all(run_stop_case, [stop_case(config, rng, kind) for kind in ("dance", "move") for _ in range(24)])
     over, rest, accel, speed = (np.array(r) for r in zip(*results))
     print(f"stops: {over.size} axis-stops, speed up to {speed.max():.2f} x the top speed "
           f"(median {np.median(speed):.2f}); past the stop point: max {100 * over.max():.3f} % of the range; "
@@ -197,27 +235,40 @@ def quick_stop_case(config, rng, kind, trigger):
     limit from where it is and its velocity over the tick before when the
     node brakes. Returns its stop_figures and, per axis, the peak
     acceleration measure over the positions from the brake on alone / the
-    limit (the node's own braking, without the motion before it)."""
+    limit (the node's own braking, without the motion before it). This
+    draws the case; run_quick_stop_case runs it."""
+    per_tick = next(iter(SimFigure(config).nodes.values())).model.sample_steps   # [fine steps]
+    show, stop_tick, pose = motion(config, rng, kind)
+    if trigger == "estop":
+        at = stop_tick * per_tick + int(rng.integers(0, per_tick))           # [fine steps]
+    else:
+        at = stop_tick * per_tick
+    return config, (show, stop_tick, pose), trigger, at
+
+
+def run_quick_stop_case(case):
+    """quick_stop_case's quick stop run: its stop_figures and the peak
+    acceleration measure from the brake on / the limit."""
+    config, (show, stop_tick, pose), trigger, at = case
     T = config.tick_period
     sim = SimFigure(config, clip_accel=False)
     sim.advance_to(0.0)
     node = next(iter(sim.nodes.values()))
     per_tick, step = node.model.sample_steps, node.model.step                # [fine steps], [s]
-    engine, stop_tick, request = motion(config, rng, kind)
+    engine, request = make_engine(config, show, pose)
     if trigger == "estop":
-        at = stop_tick * per_tick + int(rng.integers(0, per_tick))           # [fine steps]
-        on_step = lambda n: sim.handle(protocol.Estop(protocol.BROADCAST), n * step) if n == at else None
+        at_step = (at, lambda: sim.handle(protocol.Estop(protocol.BROADCAST), at * step))
         silent_from = None
     else:
         # the last setpoint at stop_tick - 1; then the watchdog shortened to a tick
-        at = stop_tick * per_tick
         request[stop_tick] = lambda: sim.handle(protocol.Config(1, (), 1, round(T * 1e6), 0), stop_tick * T)
-        on_step = lambda n: None
+        at_step = None
         silent_from = stop_tick
     with engine:
         fine = drive(config, engine, sim, stop_tick + SETTLE, lambda k: request.get(k, lambda: None)(),
-                     on_step, silent_from)
-    assert node.model.braking.all() and node.counters.watchdog_trips == (trigger == "watchdog")
+                     at_step, silent_from)
+    assert node.model.braking.all() and node.counters.watchdog_trips == (trigger == "watchdog"), \
+        (trigger, stop_tick, at, node.model.braking, node.counters)
     y = fine[at]
     v = (y - fine[at - per_tick]) / T
     after = fine[at:]
@@ -226,13 +277,13 @@ def quick_stop_case(config, rng, kind, trigger):
     return (*stop_figures(config, sim, after, v, braking_point(config, y, v)), own / (T * T) / limit)
 
 
-def test_quick_stops_brake_the_drives_to_their_own_stop_point():
+def test_quick_stops_brake_the_drives_to_their_own_stop_point(run_all):
     """Over 100 random e-stops and 32 watchdog trips (16 axes each), fixed seed."""
     config = figure()
     rng = np.random.default_rng(18)
     cases = [(kind, trigger) for trigger, n in (("estop", 50), ("watchdog", 16)) for kind in ("dance", "move")
              for _ in range(n)]
-    results = [quick_stop_case(config, rng, kind, trigger) for kind, trigger in cases]
+    results = run_all(run_quick_stop_case, [quick_stop_case(config, rng, kind, trigger) for kind, trigger in cases])
     over, rest, accel, speed, own = (np.array(r) for r in zip(*results))
     print(f"quick stops: {over.size} axis-stops, speed up to {speed.max():.2f} x the top speed "
           f"(median {np.median(speed):.2f}); past the stop point: max {100 * over.max():.3f} % of the range "
