@@ -1,8 +1,12 @@
-"""Shared fixtures: small figures and shows made on the spot, and the CLI."""
+"""Shared fixtures: small figures and shows made on the spot, the CLI, and
+the C sources' sanitizer build."""
+import concurrent.futures
 import json
+import os
 import subprocess
 import sys
 import tempfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -113,3 +117,62 @@ def sim():
 @pytest.fixture
 def figure():
     return load_config(None)
+
+
+ROOT = Path(__file__).resolve().parents[1]
+C_STD = ["-std=c11", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Werror"]
+# the flags of the follower's and the protocol codec's own builds: plain C11,
+# pedantic, and each seeing its own directory's headers alone
+FOLLOW_CFLAGS = [*C_STD, "-Wpedantic", "-I", str(ROOT / "ext")]
+PROTO_CFLAGS = [*C_STD, "-Wpedantic", "-I", str(ROOT / "firmware_protocol")]
+SANITIZE = ["-g", "-O1", "-fsanitize=address,undefined", "-fno-omit-frame-pointer",
+            "-fno-sanitize-recover=all"]
+
+
+class SanitizedBuild:
+    """The C sources compiled under AddressSanitizer and UBSan (SANITIZE),
+    each source with the same flags once per session into one directory,
+    several at once (one per CPU): the standalone C tests link their
+    programs from these objects instead of compiling the same files again
+    and again. Each object keeps its compiler's return code and messages,
+    which link() reports as one gcc call over all the files would."""
+
+    def __init__(self, directory):
+        self.directory = directory
+        self.done = {}              # (source, flags) -> (object path, returncode, stderr)
+
+    def objects(self, sources, flags):
+        """[(object path, returncode, stderr)] of sources compiled with gcc
+        flags (and SANITIZE), compiled now where not yet."""
+        keys = [(str(s), tuple(flags)) for s in sources]
+        todo = [k for k in dict.fromkeys(keys) if k not in self.done]
+        paths = {k: self.directory / f"{len(self.done) + i}-{Path(k[0]).stem}.o" for i, k in enumerate(todo)}
+
+        def compile_one(key):
+            result = subprocess.run(["gcc", *key[1], *SANITIZE, "-c", key[0], "-o", str(paths[key])],
+                                    capture_output=True, text=True)
+            return key, (paths[key], result.returncode, result.stderr)
+
+        with concurrent.futures.ThreadPoolExecutor(max(1, len(os.sched_getaffinity(0)))) as pool:
+            self.done.update(pool.map(compile_one, todo))
+        return [self.done[k] for k in keys]
+
+    def link(self, exe, parts, libs=()):
+        """Compiles parts, [(sources, flags)], as objects() and links exe
+        from them with libs; a CompletedProcess whose returncode is the
+        first failing step's (compile or link, in order) and whose stderr is
+        every step's."""
+        built = [o for sources, flags in parts for o in self.objects(sources, flags)]
+        failed = [rc for _, rc, _ in built if rc != 0]
+        stderr = "".join(err for _, _, err in built)
+        if failed:
+            return subprocess.CompletedProcess([], failed[0], "", stderr)
+        result = subprocess.run(["gcc", *SANITIZE, *(str(p) for p, _, _ in built), "-o", str(exe), *libs],
+                                capture_output=True, text=True)
+        return subprocess.CompletedProcess(result.args, result.returncode, result.stdout,
+                                           stderr + result.stderr)
+
+
+@pytest.fixture(scope="session")
+def sanitized_build(tmp_path_factory):
+    return SanitizedBuild(tmp_path_factory.mktemp("sanitized"))

@@ -28,7 +28,7 @@ from marionette.music.follower import (FLAGS, OPTIONS, STATES, FollowError, Foll
 from marionette.sim.music import synthesize
 from marionette.sim.tape import Deck, play
 from marionette.teach.make_sample import sample_path
-from conftest import figure_dict
+from conftest import FOLLOW_CFLAGS, figure_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 T = 0.020                                            # tick [s]
@@ -127,17 +127,14 @@ def lock_errors(style, seed, deck):
     track, _, err, _ = live_track(*taught(style, seed), deck)
     return err[lock_entries(track)]
 
-def test_c_follower_under_asan_ubsan_without_step_allocations(tmp_path):
+def test_c_follower_under_asan_ubsan_without_step_allocations(tmp_path, sanitized_build):
     if shutil.which("gcc") is None:
         pytest.skip("needs gcc")
     exe = tmp_path / "test_follow"
-    base = ["-std=c11", "-D_POSIX_C_SOURCE=200809L", "-Wall", "-Wextra", "-Wpedantic", "-Werror",
-            "-I", str(ROOT / "ext")]
-    build = subprocess.run(
-        ["gcc", *base, "-g", "-O1", "-fsanitize=address,undefined", "-fno-omit-frame-pointer",
-         "-fno-sanitize-recover=all", *sorted(str(p) for p in (ROOT / "ext").glob("mar_follow*.c")),
-         str(ROOT / "ext" / "tests" / "test_follow.c"), "-o", str(exe), "-lm",
-         "-Wl,--wrap=malloc,--wrap=calloc,--wrap=realloc,--wrap=free"], capture_output=True, text=True)
+    sources = [*sorted(str(p) for p in (ROOT / "ext").glob("mar_follow*.c")),
+               str(ROOT / "ext" / "tests" / "test_follow.c")]
+    build = sanitized_build.link(exe, [(sources, FOLLOW_CFLAGS)],
+                                 ["-lm", "-Wl,--wrap=malloc,--wrap=calloc,--wrap=realloc,--wrap=free"])
     assert build.returncode == 0 and not build.stderr, build.stderr
     run = subprocess.run([str(exe)], capture_output=True, text=True, timeout=300,
                          env={"ASAN_OPTIONS": "detect_leaks=1", "UBSAN_OPTIONS": "print_stacktrace=1"})
