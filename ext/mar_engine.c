@@ -45,6 +45,8 @@ struct mar_engine {
     int mode;                       /* enum mar_mode */
     int was_playing;                /* the previous tick played the show */
     int move_kind;                  /* enum mar_request being carried out */
+    int move_sync;                  /* ... its axes arrive together */
+    int move_replans;               /* a GOTO planned again from where its commands ended */
     double move_time;               /* time since the moves were planned [s] */
     double move_duration;           /* longest of them [s] */
     mar_move *moves;                /* per axis */
@@ -315,6 +317,11 @@ static double show_target(const mar_engine *e, size_t j, double p, double r)
  * then counted ticks of a stop ramp as limited (by 1e-16). */
 #define MOVE_INSIDE (1.0 - 1e-9)
 
+/* A GOTO whose commands the limiter held back (near a position limit the
+ * sampled braking bound is tighter than the profile's) is planned again
+ * from where they ended, at most this many times [1] */
+#define GOTO_REPLANS 4
+
 /* The servos' motion when this tick's command takes effect: the previous
  * command, held for elapsed_periods, moved each lag (its dead time only
  * shifts it in time). */
@@ -361,6 +368,7 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
     }
     e->mode = MAR_MODE_MOVE;
     e->move_kind = kind;
+    e->move_sync = sync;
     e->move_time = 0.0;
     /* a stop's commands lead its profile by a tick (stop_target): they
      * reach rest one tick after it, and their velocity 0 one tick later */
@@ -426,6 +434,7 @@ static void take_request(mar_engine *e)
     if (atomic_load_explicit(&e->request_seq, memory_order_relaxed) != s1)
         return;                                         /* overwritten meanwhile: next tick */
     e->request_seen = s1;
+    e->move_replans = 0;
     plan_moves(e, kind, sync, e->position);
 }
 
@@ -532,8 +541,17 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     flags |= e->mode == MAR_MODE_MOVE ? MAR_FLAG_MOVING : e->mode == MAR_MODE_HOLD ? MAR_FLAG_HOLDING : 0u;
     if (stopping)
         flags |= MAR_FLAG_STOPPING;
-    if (e->mode == MAR_MODE_MOVE && e->move_time >= e->move_duration)  /* arrived: next tick */
-        e->mode = e->move_kind == MAR_REQ_BLEND ? MAR_MODE_SHOW : MAR_MODE_HOLD;
+    if (e->mode == MAR_MODE_MOVE && e->move_time >= e->move_duration) {  /* arrived: next tick */
+        int short_of = 0;
+        for (size_t j = 0; j < e->n_axes && e->move_kind == MAR_REQ_GOTO; j++)
+            short_of |= e->cmd[j] != e->moves[j].target;
+        if (short_of && e->move_replans < GOTO_REPLANS) {
+            e->move_replans++;
+            plan_moves(e, MAR_REQ_GOTO, e->move_sync, e->position);
+        } else {
+            e->mode = e->move_kind == MAR_REQ_BLEND ? MAR_MODE_SHOW : MAR_MODE_HOLD;
+        }
+    }
 
     double slope;
     mar_record rec = {
