@@ -712,7 +712,7 @@ static void test_clock(void)
  * before the limited commands arrived and the hold stood short: a "home"
  * under load stopped short of home). Near a position limit the limiter's
  * sampled braking bound holds the commands back (0.4-2.9 mm off the pose
- * on 4 of 600 random axes): the move is planned again from there. Random axes
+ * on 4 of 600 random axes of this kind): the move is planned again. Random axes
  * and poses, one engine ticking a period at a time and one missing up to
  * 3 periods per tick for the first 6 s: every command within the limits,
  * at most a tick's worth of speed apart, the same commands tick by tick,
