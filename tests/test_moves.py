@@ -187,9 +187,9 @@ def test_retarget_and_abort_while_the_loop_runs(rng):
         overruns = engine.stats()["overruns"]
     assert np.any(r["flags"] & FLAG_STOPPING)
     check_limits(config, r["command"], show.positions[:, 0], stopping=r["flags"] & FLAG_STOPPING)
-    # (missed deadlines advance a move's profile by every period that elapsed
-    # while the limiter moves the commands by one tick's worth: a move ending
-    # then holds where the commands are, short of its target)
+    # (a GOTO's profile runs a period per tick, so missed deadlines only
+    # delay it; run by the elapsed periods, it once ended with the commands
+    # short of home: ext/mar_engine.c)
     np.testing.assert_array_equal(r["command"][-1], 0.0, err_msg=f"{overruns} overruns")
 
 
