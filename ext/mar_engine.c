@@ -375,6 +375,15 @@ static void plan_moves(mar_engine *e, int kind, int sync, double blend_position)
     e->move_duration = kind == MAR_REQ_STOP ? longest + 2.0 * e->opt.period : longest;
 }
 
+/* Every command stands on its move's target. */
+static int at_targets(const mar_engine *e)
+{
+    for (size_t j = 0; j < e->n_axes; j++)
+        if (e->cmd[j] != e->moves[j].target)
+            return 0;
+    return 1;
+}
+
 /* Axis j's target in mode MOVE at move_time t [s]: the profile. */
 static double move_target(const mar_engine *e, size_t j, double t)
 {
@@ -542,10 +551,7 @@ void mar_engine_tick(mar_engine *e, int64_t now_ns, int64_t elapsed_periods)
     if (stopping)
         flags |= MAR_FLAG_STOPPING;
     if (e->mode == MAR_MODE_MOVE && e->move_time >= e->move_duration) {  /* arrived: next tick */
-        int short_of = 0;
-        for (size_t j = 0; j < e->n_axes && e->move_kind == MAR_REQ_GOTO; j++)
-            short_of |= e->cmd[j] != e->moves[j].target;
-        if (short_of && e->move_replans < GOTO_REPLANS) {
+        if (e->move_kind == MAR_REQ_GOTO && !at_targets(e) && e->move_replans < GOTO_REPLANS) {
             e->move_replans++;
             plan_moves(e, MAR_REQ_GOTO, e->move_sync, e->position);
         } else {

@@ -772,9 +772,11 @@ void mar_follow_destroy(mar_follow *f)
     free(f);
 }
 
-/* The heights' spread starts from what a usual fit shows. */
-static void heights_afresh(mar_follow *f)
+/* The tracking heights start afresh at h [1], their spread from what a
+ * usual fit shows. */
+static void heights_afresh(mar_follow *f, double h)
 {
+    f->h_slow = f->h_fast = h;
     f->h_var = (DOUBT_DROP / DOUBT_SIGMAS) * (DOUBT_DROP / DOUBT_SIGMAS);
     f->h_low_since = 0;
 }
@@ -837,8 +839,7 @@ void mar_follow_reset(mar_follow *f, double position)
     f->have_gain = 0;
     f->doubt = f->probation = f->near = f->regaining = f->unproven = 0;
     f->gap_run = 0;
-    f->h_slow = f->h_fast = 0.0;
-    heights_afresh(f);
+    heights_afresh(f, 0.0);
     model_follow_afresh(f, isfinite(position));     /* a known start (a seek) is given */
     f->stop_run = f->play_run = f->t + 1;
     f->rho_usual = NAN;
@@ -1855,8 +1856,7 @@ static void lock_on(mar_follow *f, const cand *e, uint32_t *flags)
     f->conf = (e->fine - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
     f->measured = 0;
     f->doubt = f->probation = f->regaining = f->unproven = f->cue_pending = f->cue_refine = 0;
-    f->h_slow = f->h_fast = e->fine;
-    heights_afresh(f);
+    heights_afresh(f, e->fine);
     /* a broadband level gives each section of the music its own gain (a
      * room's or speaker's colouring: 30.2 to 33.6 dB on the pop piece), and a
      * lock's window may hold a few frames of one section: the gain heard
@@ -2152,8 +2152,7 @@ static void cue_fit(mar_follow *f, uint32_t *flags)
         f->last_good = f->t;
         f->bad_since = 0;
         f->conf = (best - f->opt.track_threshold) / (1.0 - f->opt.track_threshold);
-        f->h_slow = f->h_fast = best;
-        heights_afresh(f);
+        heights_afresh(f, best);
         f->c.locks++;
         *flags |= MAR_FOLLOW_F_MEASURED;
     } else if (best >= f->opt.track_threshold && sharp) {

@@ -47,6 +47,12 @@ def first_lock(track, err, within=0.05):
     return idx[0] * T if len(idx) else math.inf
 
 
+def lock_entries(track):
+    """Ticks at which the follower entered LOCKED (from any other state)."""
+    before = np.concatenate([[-1], track.state[:-1]])
+    return np.flatnonzero((track.state == LOCKED) & (before != LOCKED))
+
+
 def room(seed, speed):
     """A tape from the top in a reverberant room (RT60 0.5 s, 20 dB SNR), 25 s."""
     return Deck(speed=speed, wow=0.002, snr_db=20.0, reverb_s=0.5, sample_rate=16000, seconds=25.0, seed=seed)
@@ -81,8 +87,7 @@ def test_bands_place_a_cue_in_a_room_sooner_than_the_loudness():
             track, err = cued_run(style, seed, deck, use_bands)
             locks[use_bands].append(first_lock(track, err))
             if use_bands:
-                before = np.concatenate([[-1], track.state[:-1]])
-                entries = np.flatnonzero((track.state == LOCKED) & (before != LOCKED))
+                entries = lock_entries(track)
                 assert np.all(np.abs(err[entries]) <= 0.5), (case, err[entries])
                 within50.append(np.abs(err[int(1.0 / T):]) <= 0.05)
     assert np.median(locks[True]) <= 2.0, locks[True]
@@ -110,8 +115,7 @@ def test_with_bands_a_right_cue_locks_sooner_and_a_wrong_one_never():
         deck = hissy_tape(int(rng.integers(1000)), float(rng.uniform(0.94, 1.06)),
                           float(rng.uniform(10.0, 60.0)) if wrong else 0.0)
         track, err = cued_run(style, seed, deck, use_bands=True)
-        before = np.concatenate([[-1], track.state[:-1]])
-        entries = np.flatnonzero((track.state == LOCKED) & (before != LOCKED))
+        entries = lock_entries(track)
         assert np.all(np.abs(err[entries]) <= 0.5), (case, style, err[entries])
         if not wrong:
             locks.append(first_lock(track, err))
@@ -200,8 +204,7 @@ def test_a_jump_into_resembling_music_is_doubted_soon():
         track, err = cued_run("pop", 1, deck, use_bands=True)
         t = np.arange(len(err)) * T
         locked = track.state == LOCKED
-        before = np.concatenate([[-1], track.state[:-1]])
-        entries = np.flatnonzero(locked & (before != LOCKED))
+        entries = lock_entries(track)
         assert np.all(np.abs(err[entries]) <= 0.2), (case, err[entries])
         wrong_s = np.sum(locked & (np.abs(err) > 0.2) & (t > jump_s)) * T
         assert wrong_s <= 1.2, (case, wrong_s)
